@@ -1,0 +1,1 @@
+"""Per-paper experiments of the repro suite (registered via entry points)."""

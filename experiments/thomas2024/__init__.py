@@ -1,0 +1,42 @@
+"""thomas2024: Thomas & Chaumette, "Positioning in Congested Space by Combining
+Vision-based and Proximity-based Control", IEEE RA-L 9(10), 2024."""
+
+from __future__ import annotations
+
+from repro.runs.registry import Experiment, Paper
+
+from experiments.thomas2024 import config as _c
+from experiments.thomas2024.run import run
+
+
+def _figures(results_dir, figures_dir):  # type: ignore[no-untyped-def]
+    from experiments.thomas2024.figures import make_figures
+
+    return make_figures(results_dir, figures_dir)
+
+
+def _claims():  # type: ignore[no-untyped-def]
+    from experiments.thomas2024.claims import CLAIMS
+
+    return CLAIMS
+
+
+EXPERIMENTS = Paper(
+    key="thomas2024",
+    experiments=(
+        Experiment("case1", "thomas2024", "Case 1: two planes, global convergence (Fig. 7)",
+                   _c.Case1Config, run),
+        Experiment("case2", "thomas2024", "Case 2: four planes, local convergence, model (5) "
+                   "on ring 2 (Fig. 8)", _c.Case2Config, run),
+        Experiment("case3", "thomas2024", "Case 3: a hand approaches ring 2 then ring 1 (Fig. 9)",
+                   _c.Case3Config, run),
+        Experiment("case1_no_proximity", "thomas2024", "Ablation: case 1 without the CBF "
+                   "constraints (Sec. V-A says it collides)", _c.Case1NoProximityConfig, run),
+        Experiment("case2_coarse", "thomas2024", "Ablation: case 2 with the coarse model (6) on "
+                   "ring 2 (Sec. VI says it oscillates)", _c.Case2CoarseConfig, run),
+        Experiment("parallel", "thomas2024", "Sec. VI eq. (20): goal between two parallel planes",
+                   _c.ParallelConfig, run),
+    ),
+    figures=_figures,
+    claims=_claims,
+)

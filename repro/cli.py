@@ -1,0 +1,316 @@
+"""The ``repro`` command line (also ``python -m repro``).
+
+Subcommands::
+
+    repro list [-v]                       experiments (and with -v their config fields)
+    repro run EXP [--set k=v ...] [--video] [--out DIR]
+    repro results [--force] [--paper P] [--include-slow]
+    repro figures [--paper P]             figures, then results/claims.csv
+    repro report [--output REPORT.md]
+
+Global options ``--results DIR`` (default ``./results``) and ``--figures DIR``
+(default ``./figures``) may be given before or after the subcommand.
+A :class:`~repro.errors.ReproError` prints one line on stderr and exits 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from repro.config import apply_overrides, config_keys, describe, validate
+from repro.errors import ConfigError, ReproError, UnknownChoiceError
+from repro.runs import registry
+from repro.runs.registry import Experiment, Paper
+
+__all__ = ["main", "build_parser"]
+
+DEFAULT_RESULTS = Path("results")
+DEFAULT_FIGURES = Path("figures")
+DEFAULT_REPORT = Path("REPORT.md")
+EXIT_USAGE = 2
+SHORT_HASH_LEN = 8
+
+
+# --------------------------------------------------------------------------- parser
+
+
+def _add_global_options(parser: argparse.ArgumentParser, *, top_level: bool) -> None:
+    # Sub-parsers use SUPPRESS so an option given before the subcommand is not
+    # reset to its default by the sub-parser.
+    parser.add_argument(
+        "--results",
+        type=Path,
+        metavar="DIR",
+        default=DEFAULT_RESULTS if top_level else argparse.SUPPRESS,
+        help="results directory (default: ./results)",
+    )
+    parser.add_argument(
+        "--figures",
+        type=Path,
+        metavar="DIR",
+        default=DEFAULT_FIGURES if top_level else argparse.SUPPRESS,
+        help="figures directory (default: ./figures)",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argparse parser of ``repro``; each subcommand sets ``func``."""
+    parser = argparse.ArgumentParser(
+        prog="repro", description="Reproduce robotics papers in PyBullet."
+    )
+    _add_global_options(parser, top_level=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    p = sub.add_parser("list", help="list the registered experiments")
+    _add_global_options(p, top_level=False)
+    p.add_argument("-v", "--verbose", action="store_true", help="also list config fields")
+    p.set_defaults(func=_cmd_list)
+
+    p = sub.add_parser("run", help="run one experiment")
+    _add_global_options(p, top_level=False)
+    p.add_argument("experiment", help="experiment id, e.g. thomas2024.case1 (or a unique name)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        metavar="KEY=VALUE",
+        action="extend",
+        nargs="+",
+        default=[],
+        help="override a config field (nested keys with dots: camera.fu=600)",
+    )
+    p.add_argument("--video", action="store_true", help="record a video (sets video=True)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        metavar="DIR",
+        default=None,
+        help="output directory (default: <results>/<paper>/<name>, "
+        "or <name>__<hash> when the config differs from the defaults)",
+    )
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("results", help="run every experiment whose trace is missing or stale")
+    _add_global_options(p, top_level=False)
+    p.add_argument("--force", action="store_true", help="rerun even fresh experiments")
+    p.add_argument("--paper", metavar="P", default=None, help="only this paper")
+    p.add_argument("--include-slow", action="store_true", help="also run slow experiments")
+    p.set_defaults(func=_cmd_results)
+
+    p = sub.add_parser("figures", help="draw figures and evaluate claims from the traces")
+    _add_global_options(p, top_level=False)
+    p.add_argument("--paper", metavar="P", default=None, help="only this paper")
+    p.set_defaults(func=_cmd_figures)
+
+    p = sub.add_parser("report", help="render REPORT.md")
+    _add_global_options(p, top_level=False)
+    p.add_argument(
+        "--output", type=Path, metavar="FILE", default=DEFAULT_REPORT, help="(default: REPORT.md)"
+    )
+    p.set_defaults(func=_cmd_report)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``repro``; returns the process exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    try:
+        return int(args.func(args))
+    except ReproError as exc:
+        message = " ".join(str(exc).split("\n"))
+        print(f"repro: error: {message}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _select_papers(papers: Mapping[str, Paper], key: str | None) -> dict[str, Paper]:
+    if key is None:
+        return dict(papers)
+    if key not in papers:
+        raise UnknownChoiceError("paper", key, papers)
+    return {key: papers[key]}
+
+
+def _first_line(text: str) -> str:
+    lines = text.strip().splitlines()
+    return lines[0] if lines else ""
+
+
+def prepare_config(exp: Experiment, overrides: Sequence[str], video: bool = False) -> Any:
+    """``exp``'s default config with ``overrides`` (and ``video=True``) applied and validated."""
+    config = exp.config_cls()
+    if video:
+        names = {f.name for f in dataclasses.fields(config)}
+        if "video" not in names:
+            raise ConfigError(
+                f"experiment {exp.id} does not support --video: its config "
+                f"{type(config).__name__} has no 'video' field; "
+                f"valid keys: {', '.join(config_keys(config))}"
+            )
+        overrides = [*overrides, "video=true"]
+    return apply_overrides(config, overrides)
+
+
+def default_out_dir(exp: Experiment, results_dir: Path, config: Any) -> Path:
+    """``<results>/<paper>/<name>``, or ``<name>__<short config hash>`` for a non-default config.
+
+    Any override that changes the config (including ``--video``) gets its own
+    directory, so the default traces are never overwritten by a variant.
+    """
+    base = registry.experiment_dir(results_dir, exp)
+    digest = registry.compute_config_hash(config)
+    if digest == registry.compute_config_hash(exp.config_cls()):
+        return base
+    return base.with_name(f"{exp.name}__{digest[:SHORT_HASH_LEN]}")
+
+
+# --------------------------------------------------------------------------- commands
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    out = sys.stdout
+    papers = registry.load_papers()
+    experiments = registry.all_experiments(papers)
+    if not experiments:
+        print(
+            f"no experiments registered (entry-point group {registry.ENTRY_POINT_GROUP!r})",
+            file=out,
+        )
+        return 0
+    width = max(len(exp.id) for exp in experiments)
+    for exp in experiments:
+        slow = "  (slow)" if exp.slow else ""
+        print(f"{exp.id:<{width}}  {_first_line(exp.description)}{slow}", file=out)
+        if args.verbose:
+            rows = describe(exp.config_cls)
+            if not rows:
+                continue
+            head = max(len(f"{name}: {tname} = {default}") for name, tname, default, _ in rows)
+            for name, tname, default, info in rows:
+                left = f"{name}: {tname} = {default}"
+                print(f"    {left:<{head}}  {info}".rstrip(), file=out)
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    papers = registry.load_papers()
+    exp = registry.find_experiment(papers, args.experiment)
+    # Validate everything before running anything.
+    config = prepare_config(exp, args.overrides, video=args.video)
+    out_dir = args.out if args.out is not None else default_out_dir(exp, args.results, config)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    print(f"running {exp.id} -> {out_dir}", file=sys.stderr)
+    result = exp.run(config, out_dir)
+    print(result if result is not None else out_dir)
+    return 0
+
+
+def _cmd_results(args: argparse.Namespace) -> int:
+    papers = _select_papers(registry.load_papers(), args.paper)
+    todo: list[tuple[Experiment, Any, str]] = []
+    fresh: list[tuple[Experiment, str]] = []
+    skipped: list[Experiment] = []
+    for exp in registry.all_experiments(papers):
+        if exp.slow and not args.include_slow:
+            skipped.append(exp)
+            continue
+        config = exp.config_cls()
+        validate(config)
+        if args.force:
+            todo.append((exp, config, "forced"))
+            continue
+        stale, reason = registry.is_stale(exp, args.results, config)
+        if stale:
+            todo.append((exp, config, reason))
+        else:
+            fresh.append((exp, reason))
+
+    ran: list[tuple[Experiment, str, Path]] = []
+    with tqdm(
+        total=len(todo),
+        desc="experiments",
+        unit="exp",
+        file=sys.stderr,
+        disable=not sys.stderr.isatty(),
+    ) as bar:
+        for exp, config, reason in todo:
+            bar.set_postfix_str(exp.id)
+            out_dir = registry.experiment_dir(args.results, exp)
+            out_dir.mkdir(parents=True, exist_ok=True)
+            result = exp.run(config, out_dir)
+            ran.append((exp, reason, Path(result) if result is not None else out_dir))
+            bar.update(1)
+
+    for exp, reason, path in ran:
+        print(f"ran    {exp.id}  ({reason}) -> {path}")
+    for exp, reason in fresh:
+        print(f"fresh  {exp.id}  ({reason})")
+    for exp in skipped:
+        print(f"skip   {exp.id}  (slow; use --include-slow)")
+    print(f"{len(ran)} ran, {len(fresh)} fresh, {len(skipped)} skipped")
+    return 0
+
+
+def _cmd_figures(args: argparse.Namespace) -> int:
+    papers = _select_papers(registry.load_papers(), args.paper)
+    results_dir: Path = args.results
+    figures_dir: Path = args.figures
+    drew_any = False
+    for paper in papers.values():
+        if paper.figures is None:
+            print(f"{paper.key}: no figures")
+            continue
+        figures_dir.mkdir(parents=True, exist_ok=True)
+        for path in paper.figures(results_dir, figures_dir) or []:
+            print(f"{paper.key}: wrote {path}")
+        drew_any = True
+
+    claims = [c for paper in papers.values() if paper.claims is not None for c in paper.claims()]
+    if claims:
+        from repro.runs.claims import evaluate_claims, write_claims_csv
+
+        table = evaluate_claims(claims, results_dir)
+        csv_path = results_dir / "claims.csv"
+        results_dir.mkdir(parents=True, exist_ok=True)
+        write_claims_csv(table, csv_path)
+        if hasattr(table, "to_string"):
+            print(table.to_string(index=False))
+        print(f"wrote {len(claims)} claims to {csv_path}")
+    elif not drew_any:
+        print("no paper has figures or claims")
+    return 0
+
+
+def source_paths() -> list[Path]:
+    """Every ``*.py`` file of the ``repro`` and ``experiments`` packages, sorted."""
+    root = Path(__file__).resolve().parent.parent
+    paths: list[Path] = []
+    for package in ("repro", "experiments"):
+        folder = root / package
+        if folder.is_dir():
+            paths.extend(sorted(p for p in folder.rglob("*.py") if "__pycache__" not in p.parts))
+    return paths
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from repro.runs.report import render_report
+
+    result = render_report(args.results, args.figures, source_paths(), args.output)
+    print(f"wrote {result if result is not None else args.output}")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

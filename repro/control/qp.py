@@ -1,0 +1,581 @@
+r"""Small dense QP layer for the CBF-QP controllers (proxsuite and OSQP backends).
+
+Problem solved, with :math:`x \in \mathbb{R}^n` and :math:`m` inequality rows:
+
+.. math::
+
+    \min_x \; \tfrac12 x^\top H x + g^\top x
+    \quad \text{s.t.} \quad l \le C x \le u, \qquad lb \le x \le ub
+
+Bounds may be :math:`\pm\infty` (a one-sided row has ``l = -inf`` or ``u = +inf``). The
+CBF-QP of Thomas & Chaumette (2024), eq. (10), :math:`a_k^\top u \ge b_k`, is the case
+``C = [a_k^T]``, ``l = b``, ``u = +inf``.
+
+Dual sign convention (proxsuite's; OSQP's ``y`` has the same sign, checked in
+``tests/test_qp.py``). The solution carries ``z`` (one per row of ``C``) and ``z_box``
+(one per variable) such that
+
+.. math::
+
+    H x + g + C^\top z + z_{box} = 0,
+
+with :math:`z_i \le 0` where the lower bound :math:`l_i` is active, :math:`z_i \ge 0` where
+the upper bound :math:`u_i` is active and :math:`z_i = 0` on inactive rows (same for
+``z_box`` with ``lb``/``ub``). The paper writes its rows as :math:`a_k^\top x \ge b_k` with
+the Lagrangian :math:`L = \tfrac12 x^\top H x + g^\top x - \sum_k \kappa_k (a_k^\top x - b_k)`,
+:math:`\kappa_k \ge 0`; hence :math:`\kappa = \max(-z, 0)`, see :func:`lower_multipliers`.
+
+Statuses: ``"solved"`` (converged *and* the KKT residuals recomputed here are small),
+``"infeasible"`` (primal or dual infeasibility detected, or ``l > u``), ``"max_iter"``
+(iteration budget spent; infeasible problems often end here with proxsuite, which does
+not always certify infeasibility), ``"failed"`` (anything else, including a backend that
+claims success with large KKT residuals, and non-finite data). :meth:`QPSolver.solve`
+never raises for these: the controller applies its fallback. When the status is not
+``"solved"``, ``x``, ``z`` and ``z_box`` are the backend's last iterate with non-finite
+entries replaced by 0; they must not be applied as a command.
+
+Backends are imported lazily, so importing this module costs only NumPy.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Literal, NamedTuple
+
+import numpy as np
+
+from repro.errors import ReproError, UnknownChoiceError
+
+SOLVERS: tuple[str, ...] = ("proxsuite", "osqp")
+"""Valid values of ``QPSolver(solver=...)``."""
+
+QPStatus = Literal["solved", "infeasible", "max_iter", "failed"]
+STATUSES: tuple[str, ...] = ("solved", "infeasible", "max_iter", "failed")
+
+KKT_TOL: float = 1e-5
+"""Default relative tolerance above which a backend "success" is downgraded to "failed"."""
+
+OSQP_ADMM_EPS: float = 1e-5
+"""Absolute ADMM tolerance of OSQP's first stage, before polishing (see ``_OsqpBackend``)."""
+
+
+class QPDimensionError(ReproError, ValueError):
+    """A QP array has the wrong shape for the solver it is given to."""
+
+
+class QPProblem(NamedTuple):
+    r"""Dense QP :math:`\min \tfrac12 x^\top H x + g^\top x` s.t. ``l <= C x <= u``,
+    ``lb <= x <= ub``.
+
+    Attributes:
+        H: (n, n) symmetric positive (semi)definite Hessian.
+        g: (n,) linear term.
+        C: (m, n) inequality rows, or None when m = 0.
+        l: (m,) lower bounds of ``C x`` (entries may be ``-inf``); None means all ``-inf``.
+        u: (m,) upper bounds of ``C x`` (entries may be ``+inf``); None means all ``+inf``.
+        lb: (n,) lower bound on ``x`` (entries may be ``-inf``); None means no bound.
+        ub: (n,) upper bound on ``x`` (entries may be ``+inf``); None means no bound.
+    """
+
+    H: np.ndarray
+    g: np.ndarray
+    C: np.ndarray | None = None
+    l: np.ndarray | None = None
+    u: np.ndarray | None = None
+    lb: np.ndarray | None = None
+    ub: np.ndarray | None = None
+
+
+class QPSolution(NamedTuple):
+    """Result of :meth:`QPSolver.solve`.
+
+    Attributes:
+        x: (n,) primal solution.
+        z: (m,) duals of the ``C`` rows (sign convention in the module docstring).
+        z_box: (n,) duals of the box bounds.
+        status: one of :data:`STATUSES`.
+        iterations: backend iterations (proxsuite: total inner iterations; OSQP: ADMM
+            iterations, polishing not counted).
+        solve_time_s: wall time of the whole :meth:`QPSolver.solve` call [s], including
+            data transfer to the backend and the KKT check.
+        primal_residual: max bound violation of ``C x`` and ``x``, recomputed here on the
+            unscaled problem (infinity norm).
+        dual_residual: infinity norm of ``H x + g + C^T z + z_box``, recomputed here.
+    """
+
+    x: np.ndarray
+    z: np.ndarray
+    z_box: np.ndarray
+    status: QPStatus
+    iterations: int
+    solve_time_s: float
+    primal_residual: float
+    dual_residual: float
+
+
+class _Dense(NamedTuple):
+    """A QPProblem with every optional part filled in (infinite bounds kept as inf)."""
+
+    H: np.ndarray
+    g: np.ndarray
+    C: np.ndarray
+    l: np.ndarray
+    u: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+
+
+class _RawResult(NamedTuple):
+    """What a backend returns before the status is checked against the KKT conditions."""
+
+    x: np.ndarray
+    z: np.ndarray
+    z_box: np.ndarray
+    status: QPStatus
+    iterations: int
+
+
+def _as_dense(problem: QPProblem, n: int | None = None, m: int | None = None) -> _Dense:
+    """Fill the optional parts of ``problem`` and check every shape.
+
+    Raises:
+        QPDimensionError: when a shape disagrees with ``n`` / ``m`` (inferred from ``H``
+            and ``C`` when not given).
+    """
+    H = np.asarray(problem.H, dtype=float)
+    g = np.asarray(problem.g, dtype=float).reshape(-1)
+    n_p = H.shape[0] if H.ndim == 2 else -1
+    if n is None:
+        n = n_p
+    if H.shape != (n, n):
+        raise QPDimensionError(f"H has shape {H.shape}, expected ({n}, {n})")
+    if g.shape != (n,):
+        raise QPDimensionError(f"g has shape {g.shape}, expected ({n},)")
+    if problem.C is None:
+        C = np.zeros((0, n))
+    else:
+        C = np.asarray(problem.C, dtype=float)
+        if C.ndim == 1 and C.size == n:
+            C = C.reshape(1, n)
+    if m is None:
+        m = C.shape[0]
+    if C.shape != (m, n):
+        raise QPDimensionError(f"C has shape {C.shape}, expected ({m}, {n})")
+
+    def vec(v: np.ndarray | None, size: int, fill: float, name: str) -> np.ndarray:
+        if v is None:
+            return np.full(size, fill)
+        out = np.asarray(v, dtype=float).reshape(-1)
+        if out.shape != (size,):
+            raise QPDimensionError(f"{name} has shape {out.shape}, expected ({size},)")
+        return out
+
+    return _Dense(
+        H=H,
+        g=g,
+        C=C,
+        l=vec(problem.l, m, -np.inf, "l"),
+        u=vec(problem.u, m, np.inf, "u"),
+        lb=vec(problem.lb, n, -np.inf, "lb"),
+        ub=vec(problem.ub, n, np.inf, "ub"),
+    )
+
+
+def _kkt(d: _Dense, x: np.ndarray, z: np.ndarray, z_box: np.ndarray) -> dict[str, float]:
+    """KKT residuals of ``(x, z, z_box)``, rows and box stacked (see :func:`kkt_residuals`)."""
+    v = np.concatenate([d.C @ x, x])
+    y = np.concatenate([z, z_box])
+    lo = np.concatenate([d.l, d.lb])
+    hi = np.concatenate([d.u, d.ub])
+    stat = d.H @ x + d.g + d.C.T @ z + z_box
+    y_lo = np.maximum(-y, 0.0)  # multipliers of active lower bounds
+    y_hi = np.maximum(y, 0.0)  # multipliers of active upper bounds
+    lo_fin, hi_fin = np.isfinite(lo), np.isfinite(hi)
+    # Infinite bounds never bind; a multiplier on one is a dual-sign error, not a gap.
+    gap_lo = y_lo * np.abs(np.where(lo_fin, v - lo, 0.0))
+    gap_hi = y_hi * np.abs(np.where(hi_fin, hi - v, 0.0))
+    return {
+        "stationarity": float(np.max(np.abs(stat))),
+        "primal_infeasibility": float(max(np.max(np.maximum(lo - v, v - hi)), 0.0)),
+        "complementarity": float(np.max(np.maximum(gap_lo, gap_hi))),
+        "dual_sign": float(np.max(np.maximum(y_lo * ~lo_fin, y_hi * ~hi_fin))),
+    }
+
+
+def kkt_residuals(problem: QPProblem, sol: QPSolution) -> dict[str, float]:
+    r"""KKT residuals of ``sol`` for ``problem`` (infinity norms, unscaled).
+
+    .. math::
+
+        \text{stationarity} &= \| H x + g + C^\top z + z_{box} \|_\infty \\
+        \text{primal\_infeasibility} &= \max\big(0,\ l - Cx,\ Cx - u,\ lb - x,\ x - ub\big) \\
+        \text{complementarity} &= \max_i \big( z_i^- \,|C_i x - l_i|,\ z_i^+ \,|u_i - C_i x| \big)
+            \ \text{(and the same for the box)} \\
+        \text{dual\_sign} &= \max_i \big( z_i^+ [u_i = +\infty],\ z_i^- [l_i = -\infty] \big)
+
+    with :math:`z^\pm = \max(\pm z, 0)`. Each is >= 0 and ~0 at an exact optimum.
+
+    Returns:
+        dict with keys ``"stationarity"``, ``"primal_infeasibility"``, ``"complementarity"``,
+        ``"dual_sign"``.
+    """
+    d = _as_dense(problem)
+    x = np.asarray(sol.x, dtype=float)
+    z = np.asarray(sol.z, dtype=float).reshape(-1)
+    z_box = np.asarray(sol.z_box, dtype=float).reshape(-1)
+    if z.shape != (d.C.shape[0],) or z_box.shape != x.shape:
+        raise QPDimensionError(
+            f"solution duals have shapes z {z.shape}, z_box {z_box.shape}; expected "
+            f"({d.C.shape[0]},) and {x.shape}"
+        )
+    return _kkt(d, x, z, z_box)
+
+
+def lower_multipliers(sol: QPSolution) -> np.ndarray:
+    r"""Multipliers :math:`\kappa \ge 0` of the rows written as :math:`C x \ge l`.
+
+    This is the paper's convention, with Lagrangian
+    :math:`L = \tfrac12 x^\top H x + g^\top x - \sum_k \kappa_k (a_k^\top x - b_k)`, so
+
+    .. math::
+
+        \kappa = \max(-z, 0).
+
+    Returns:
+        (m,) array, 0 on rows whose lower bound is inactive.
+    """
+    return np.maximum(-np.asarray(sol.z, dtype=float), 0.0)
+
+
+def _finite_or_zero(v: Any, size: int) -> np.ndarray:
+    """Copy of ``v`` as a float (size,) array with non-finite entries (or a missing ``v``)
+    replaced by 0."""
+    if v is None:
+        return np.zeros(size)
+    out = np.array(v, dtype=float).reshape(-1)
+    if out.shape != (size,):
+        return np.zeros(size)
+    out[~np.isfinite(out)] = 0.0
+    return out
+
+
+class _ProxsuiteBackend:
+    """proxsuite dense ``QP`` class, warm-started from the previous result.
+
+    ``init`` on the first call (and after :meth:`reset`), ``update`` + ``solve`` after. The
+    initial-guess setting is written before ``init`` (writing it between ``init`` and the
+    first ``solve`` segfaults proxsuite 0.8.0). ``results.z`` has length m + n with
+    ``box_constraints=True``: the first m entries are the row duals, the last n the box duals.
+    """
+
+    def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool) -> None:
+        import proxsuite  # lazy: heavy import
+
+        self._proxqp = proxsuite.proxqp
+        self.n, self.m = n, m
+        self.eps_abs, self.max_iter, self.warm_start = eps_abs, max_iter, warm_start
+        self._qp: Any = None
+
+    @property
+    def is_warm(self) -> bool:
+        return self.warm_start and self._qp is not None
+
+    def reset(self) -> None:
+        self._qp = None
+
+    def _new_qp(self) -> Any:
+        pq = self._proxqp
+        qp = pq.dense.QP(self.n, 0, self.m, True)
+        qp.settings.initial_guess = (
+            pq.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+            if self.warm_start
+            else pq.InitialGuess.NO_INITIAL_GUESS
+        )
+        qp.settings.eps_abs = self.eps_abs
+        qp.settings.eps_rel = 0.0
+        qp.settings.max_iter = self.max_iter
+        qp.settings.verbose = False
+        return qp
+
+    def solve(self, d: _Dense) -> _RawResult:
+        pq = self._proxqp
+        # proxsuite accepts +-inf bounds directly (checked in the tests).
+        if self._qp is None or not self.warm_start:
+            self._qp = self._new_qp()
+            self._qp.init(d.H, d.g, None, None, d.C, d.l, d.u, d.lb, d.ub)
+        else:
+            self._qp.update(d.H, d.g, None, None, d.C, d.l, d.u, d.lb, d.ub)
+        self._qp.solve()
+        res = self._qp.results
+        st = res.info.status
+        if st == pq.PROXQP_SOLVED:
+            status: QPStatus = "solved"
+        elif st in (pq.PROXQP_PRIMAL_INFEASIBLE, pq.PROXQP_DUAL_INFEASIBLE):
+            status = "infeasible"
+        elif st == pq.PROXQP_MAX_ITER_REACHED:
+            status = "max_iter"
+        else:  # PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE, PROXQP_NOT_RUN
+            status = "failed"
+        z_all = np.asarray(res.z, dtype=float).reshape(-1)
+        return _RawResult(
+            x=_finite_or_zero(res.x, self.n),
+            z=_finite_or_zero(z_all[: self.m], self.m),
+            z_box=_finite_or_zero(z_all[self.m :], self.n),
+            status=status,
+            iterations=int(res.info.iter),
+        )
+
+
+class _OsqpBackend:
+    """OSQP 1.x with the box stacked as identity rows under ``C``.
+
+    The constraint matrix ``A = [C; I]`` and the upper triangle of ``P = H`` are stored as
+    CSC matrices with a fixed pattern (dense ``C``, diagonal ``I``, dense upper ``H``), so
+    later problems only change values (``update(Px=..., Ax=...)``) and the warm start
+    survives. ``y`` has proxsuite's sign convention, ``y = [z; z_box]``.
+
+    Two stages, because OSQP's ADMM (with its duality-gap check) needs thousands of
+    iterations to reach 1e-9 on these problems while its polishing step (an active-set
+    solve of the reduced KKT system) is exact once ADMM has found the active set: ADMM runs
+    to ``max(eps_abs, OSQP_ADMM_EPS)`` and is polished; only if polishing fails does ADMM
+    continue to ``eps_abs`` within the remaining iteration budget.
+    """
+
+    def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool) -> None:
+        import osqp  # lazy: heavy import
+
+        self._osqp = osqp
+        self.n, self.m = n, m
+        self.eps_abs, self.max_iter, self.warm_start = eps_abs, max_iter, warm_start
+        self.eps_admm = max(eps_abs, OSQP_ADMM_EPS)
+        self._solver: Any = None
+        # Upper triangle of H, column-major: column j holds rows 0..j.
+        self._p_cols = np.repeat(np.arange(n), np.arange(1, n + 1))
+        self._p_rows = np.concatenate([np.arange(j + 1) for j in range(n)]).astype(np.int64)
+        self._p_indptr = np.concatenate([[0], np.cumsum(np.arange(1, n + 1))]).astype(np.int64)
+        # A = [C; I]: column j holds rows 0..m-1 (dense C) and row m + j (identity).
+        self._a_indices = np.concatenate(
+            [np.concatenate([np.arange(m), [m + j]]) for j in range(n)]
+        ).astype(np.int64)
+        self._a_indptr = (np.arange(n + 1) * (m + 1)).astype(np.int64)
+
+    @property
+    def is_warm(self) -> bool:
+        return self.warm_start and self._solver is not None
+
+    def reset(self) -> None:
+        self._solver = None
+
+    def _px(self, H: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(H[self._p_rows, self._p_cols])
+
+    def _ax(self, C: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(np.vstack([C, np.ones((1, self.n))]).T.reshape(-1))
+
+    def solve(self, d: _Dense) -> _RawResult:
+        import scipy.sparse as sp
+
+        osqp = self._osqp
+        lo = np.concatenate([d.l, d.lb])  # OSQP clips +-inf to its OSQP_INFTY itself
+        hi = np.concatenate([d.u, d.ub])
+        px, ax = self._px(d.H), self._ax(d.C)
+        if self._solver is None or not self.warm_start:
+            n, m = self.n, self.m
+            P = sp.csc_matrix((px, self._p_rows, self._p_indptr), shape=(n, n))
+            A = sp.csc_matrix((ax, self._a_indices, self._a_indptr), shape=(m + n, n))
+            self._solver = osqp.OSQP()
+            self._solver.setup(
+                P,
+                d.g.copy(),
+                A,
+                lo,
+                hi,
+                eps_abs=self.eps_admm,
+                eps_rel=self.eps_admm,
+                max_iter=self.max_iter,
+                polishing=True,
+                verbose=False,
+                warm_starting=True,  # warm_start=False is a fresh setup per solve
+            )
+        else:
+            self._solver.update(q=d.g.copy(), l=lo, u=hi, Px=px, Ax=ax)
+        S = osqp.SolverStatus
+        res = self._solver.solve(raise_error=False)
+        iterations = int(res.info.iter)
+        if (
+            res.info.status_val == S.OSQP_SOLVED
+            and res.info.status_polish != 1
+            and self.eps_abs < self.eps_admm
+            and iterations < self.max_iter
+        ):
+            # Polishing failed: continue ADMM from its last iterate to the full tolerance.
+            self._solver.update_settings(
+                eps_abs=self.eps_abs, eps_rel=0.0, max_iter=self.max_iter - iterations
+            )
+            res = self._solver.solve(raise_error=False)
+            iterations += int(res.info.iter)
+            self._solver.update_settings(
+                eps_abs=self.eps_admm, eps_rel=self.eps_admm, max_iter=self.max_iter
+            )
+        sv = res.info.status_val
+        if sv == S.OSQP_SOLVED:
+            status: QPStatus = "solved"
+        elif sv in (
+            S.OSQP_PRIMAL_INFEASIBLE,
+            S.OSQP_PRIMAL_INFEASIBLE_INACCURATE,
+            S.OSQP_DUAL_INFEASIBLE,
+            S.OSQP_DUAL_INFEASIBLE_INACCURATE,
+        ):
+            status = "infeasible"
+        elif sv in (
+            S.OSQP_MAX_ITER_REACHED,
+            S.OSQP_TIME_LIMIT_REACHED,
+            S.OSQP_SOLVED_INACCURATE,  # returned instead of MAX_ITER when close to eps
+        ):
+            status = "max_iter"
+        else:  # NON_CVX, SIGINT, UNSOLVED
+            status = "failed"
+        y = None if res.y is None else np.asarray(res.y, dtype=float).reshape(-1)
+        return _RawResult(
+            x=_finite_or_zero(res.x, self.n),
+            z=_finite_or_zero(None if y is None else y[: self.m], self.m),
+            z_box=_finite_or_zero(None if y is None else y[self.m :], self.n),
+            status=status,
+            iterations=iterations,
+        )
+
+
+_BACKENDS: dict[str, type[_ProxsuiteBackend] | type[_OsqpBackend]] = {
+    "proxsuite": _ProxsuiteBackend,
+    "osqp": _OsqpBackend,
+}
+
+
+class QPSolver:
+    """Solve a stream of QPs of fixed size (n variables, m rows), warm-started in sequence.
+
+    Args:
+        n: number of variables (7 joint velocities [rad/s] for the Panda).
+        m: number of rows of ``C`` (36 proximity-sensor rows in thomas2024); may be 0.
+        solver: one of :data:`SOLVERS`.
+        eps_abs: absolute tolerance handed to the backend (``eps_rel`` is 0).
+        max_iter: iteration budget per solve; bounds the time spent on an infeasible problem.
+        warm_start: start each solve from the previous solution. The warm start is
+            forgotten by :meth:`reset` and after any solve whose status is not ``"solved"``.
+        kkt_tol: relative tolerance of the check applied to every backend "success"; see
+            :meth:`solve`.
+
+    Raises:
+        UnknownChoiceError: ``solver`` is not in :data:`SOLVERS`.
+    """
+
+    def __init__(
+        self,
+        n: int,
+        m: int,
+        solver: str = "proxsuite",
+        eps_abs: float = 1e-9,
+        max_iter: int = 1000,
+        warm_start: bool = True,
+        kkt_tol: float = KKT_TOL,
+    ) -> None:
+        if solver not in _BACKENDS:
+            raise UnknownChoiceError("QP solver", solver, SOLVERS)
+        if n < 1 or m < 0:
+            raise QPDimensionError(f"need n >= 1 and m >= 0, got n={n}, m={m}")
+        self.n, self.m, self.solver = int(n), int(m), solver
+        self.kkt_tol = float(kkt_tol)
+        self._backend = _BACKENDS[solver](self.n, self.m, eps_abs, max_iter, warm_start)
+
+    def reset(self) -> None:
+        """Forget the warm start: the next solve starts cold (fresh backend state)."""
+        self._backend.reset()
+
+    def solve(self, problem: QPProblem) -> QPSolution:
+        r"""Solve ``problem``; never raises for an infeasible or unsolvable problem.
+
+        A backend "success" is accepted only if the KKT residuals recomputed on the unscaled
+        problem satisfy, with :math:`\epsilon` = ``kkt_tol`` and infinity norms,
+
+        .. math::
+
+            \text{stationarity} &\le \epsilon\, s_d, \quad
+            s_d = 1 + \max(\|Hx\|, \|g\|, \|C^\top z\|, \|z_{box}\|) \\
+            \text{primal\_infeasibility} &\le \epsilon\, s_p, \quad
+            s_p = 1 + \max(\|Cx\|, \|x\|) \\
+            \text{dual\_sign} &\le \epsilon\, s_d, \qquad
+            \text{complementarity} \le \epsilon\, s_d\, s_p.
+
+        Otherwise, if the solve was warm-started, it is repeated once cold (proxsuite
+        0.8.0 occasionally reports "solved" from a warm start with a wrong-sign multiplier
+        and a wrong ``x``); if the check still fails the status is ``"failed"``.
+
+        Args:
+            problem: shapes (n, n), (n,), (m, n), (m,), (m,), (n,), (n,).
+
+        Returns:
+            the solution; ``iterations`` sums both attempts when a cold retry happened.
+
+        Raises:
+            QPDimensionError: a shape does not match ``(n, m)``.
+        """
+        t0 = time.perf_counter()
+        d = _as_dense(problem, self.n, self.m)
+        if not all(np.all(np.isfinite(a)) for a in (d.H, d.g, d.C)) or any(
+            np.any(np.isnan(a)) for a in (d.l, d.u, d.lb, d.ub)
+        ):
+            raw, status, kkt = self._trivial(d, "failed")
+        elif False:
+            raw, status, kkt = self._trivial(d, "infeasible")
+        else:
+            was_warm = self._backend.is_warm
+            raw, status, kkt = self._attempt(d)
+            if raw.status == "solved" and status == "failed" and was_warm:
+                self._backend.reset()
+                first_iterations = raw.iterations
+                raw, status, kkt = self._attempt(d)
+                raw = raw._replace(iterations=raw.iterations + first_iterations)
+        if status != "solved":
+            self._backend.reset()  # never warm-start from a failed iterate
+        return QPSolution(
+            x=raw.x,
+            z=raw.z,
+            z_box=raw.z_box,
+            status=status,
+            iterations=raw.iterations,
+            solve_time_s=time.perf_counter() - t0,
+            primal_residual=kkt["primal_infeasibility"],
+            dual_residual=kkt["stationarity"],
+        )
+
+    def _attempt(self, d: _Dense) -> tuple[_RawResult, QPStatus, dict[str, float]]:
+        """One backend solve, its KKT residuals and its status after the KKT check."""
+        raw = self._backend.solve(d)
+        kkt = _kkt(d, raw.x, raw.z, raw.z_box)
+        status = raw.status
+        if status == "solved" and not self._kkt_ok(d, raw, kkt):
+            status = "failed"
+        return raw, status, kkt
+
+    def _trivial(
+        self, d: _Dense, status: QPStatus
+    ) -> tuple[_RawResult, QPStatus, dict[str, float]]:
+        """A zero result for data the backends are not given (non-finite, or ``l > u``)."""
+        raw = _RawResult(np.zeros(self.n), np.zeros(self.m), np.zeros(self.n), status, 0)
+        with np.errstate(invalid="ignore"):
+            kkt = _kkt(d, raw.x, raw.z, raw.z_box)
+        return raw, status, kkt
+
+    def _kkt_ok(self, d: _Dense, raw: _RawResult, kkt: dict[str, float]) -> bool:
+        def nrm(v: np.ndarray) -> float:
+            return float(np.max(np.abs(v))) if v.size else 0.0
+
+        s_d = 1.0 + max(nrm(d.H @ raw.x), nrm(d.g), nrm(d.C.T @ raw.z), nrm(raw.z_box))
+        s_p = 1.0 + max(nrm(d.C @ raw.x), nrm(raw.x))
+        eps = self.kkt_tol
+        return (
+            kkt["stationarity"] <= eps * s_d
+            and kkt["primal_infeasibility"] <= eps * s_p
+            and kkt["dual_sign"] <= eps * s_d
+            and kkt["complementarity"] <= eps * s_d * s_p
+        )

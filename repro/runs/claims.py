@@ -1,0 +1,237 @@
+"""Paper claims checked against recorded runs, and the tidy claims table (results/claims.csv).
+
+A :class:`Claim` names the run directories it needs (under ``results/<paper>/``) and a check
+that turns their :class:`~repro.runs.trace.RunFiles` into a :class:`ClaimResult`. The table
+never crashes: a missing or unfinished run, or a check that raises, gives status ``"not_run"``
+with the reason in ``measured``.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from repro.errors import ConfigError, ReproError, UnknownChoiceError
+from repro.runs.trace import RunFiles, load_run
+
+__all__ = [
+    "CLAIMS_COLUMNS",
+    "STATUSES",
+    "Claim",
+    "ClaimResult",
+    "evaluate_claims",
+    "natural_key",
+    "read_claims_csv",
+    "validate_claims_table",
+    "write_claims_csv",
+]
+
+STATUSES = ("reproduced", "not_reproduced", "not_run")
+CLAIMS_COLUMNS = ("paper", "claim", "description", "expected", "measured", "status")
+
+
+@dataclass(frozen=True)
+class ClaimResult:
+    """Outcome of one claim check.
+
+    Attributes:
+        measured: what was measured, with units, e.g. "max error 1.8 mm".
+        status: one of STATUSES.
+    """
+
+    measured: str
+    status: str
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.measured, str):
+            raise ConfigError(f"measured must be a string, got {type(self.measured).__name__}")
+        if self.status not in STATUSES:
+            raise UnknownChoiceError("claim status", self.status, STATUSES)
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One quantitative claim of a paper and how to check it.
+
+    Attributes:
+        paper: paper key, e.g. "thomas2024".
+        claim: claim id within the paper, e.g. "1" or "2b".
+        description: what the paper states.
+        expected: the paper's value or bound, with units.
+        runs: run-directory names relative to results/<paper>/ that the check needs.
+        check: maps {run name: RunFiles} to a ClaimResult.
+    """
+
+    paper: str
+    claim: str
+    description: str
+    expected: str
+    runs: tuple[str, ...]
+    check: Callable[[dict[str, RunFiles]], ClaimResult]
+
+    def __post_init__(self) -> None:
+        for name in ("paper", "claim"):
+            value = getattr(self, name)
+            if not isinstance(value, str) or not value.strip():
+                raise ConfigError(f"claim {name} must be a non-empty string, got {value!r}")
+        if isinstance(self.runs, str):
+            raise ConfigError(
+                f"claim runs must be a sequence of names, got the string {self.runs!r}"
+            )
+        object.__setattr__(self, "runs", tuple(self.runs))
+        for run in self.runs:
+            if (
+                not isinstance(run, str)
+                or not run
+                or Path(run).is_absolute()
+                or ".." in Path(run).parts
+            ):
+                raise ConfigError(f"claim run must be a relative directory name, got {run!r}")
+        if not callable(self.check):
+            raise ConfigError(f"claim check must be callable, got {self.check!r}")
+
+
+def _row(claim: Claim, measured: str, status: str) -> dict[str, str]:
+    return {
+        "paper": claim.paper,
+        "claim": claim.claim,
+        "description": claim.description,
+        "expected": claim.expected,
+        "measured": measured,
+        "status": status,
+    }
+
+
+def _load_runs(
+    claim: Claim, results_dir: Path, cache: dict[Path, RunFiles | str]
+) -> dict[str, RunFiles] | str:
+    """The claim's runs, or a message saying why one is unusable."""
+    runs: dict[str, RunFiles] = {}
+    for name in claim.runs:
+        run_dir = results_dir / claim.paper / name
+        if run_dir not in cache:
+            if not run_dir.is_dir():
+                cache[run_dir] = f"run {name!r} missing ({run_dir} does not exist)"
+            else:
+                try:
+                    cache[run_dir] = load_run(run_dir)
+                except ReproError as exc:
+                    cache[run_dir] = f"run {name!r} unreadable: {exc}"
+        loaded = cache[run_dir]
+        if isinstance(loaded, str):
+            return loaded
+        status = loaded.manifest.get("status")
+        if status != "completed":
+            reason = loaded.manifest.get("reason") or "no reason recorded"
+            return f"run {name!r} did not complete (status {status!r}: {reason})"
+        runs[name] = loaded
+    return runs
+
+
+def evaluate_claims(claims: Sequence[Claim], results_dir: Path) -> pd.DataFrame:
+    """Check every claim against the runs in results_dir/<paper>/<run>.
+
+    Returns:
+        One row per claim, columns CLAIMS_COLUMNS (all strings), in the order of ``claims``.
+    """
+    results_dir = Path(results_dir)
+    cache: dict[Path, RunFiles | str] = {}
+    rows = []
+    for claim in claims:
+        runs = _load_runs(claim, results_dir, cache)
+        if isinstance(runs, str):
+            rows.append(_row(claim, runs, "not_run"))
+            continue
+        try:
+            result = claim.check(runs)
+        except Exception as exc:  # a broken check must not take the whole table down
+            rows.append(_row(claim, f"check failed: {type(exc).__name__}: {exc}", "not_run"))
+            continue
+        if not isinstance(result, ClaimResult):
+            message = f"check returned {type(result).__name__}, not ClaimResult"
+            rows.append(_row(claim, message, "not_run"))
+            continue
+        rows.append(_row(claim, result.measured, result.status))
+    return pd.DataFrame(rows, columns=list(CLAIMS_COLUMNS), dtype=object)
+
+
+def natural_key(text: str) -> tuple[tuple[int, int | str], ...]:
+    """Sort key ordering digit runs numerically: "2" < "10", "2a" < "2b" < "10"."""
+    return tuple(
+        (0, int(part)) if part.isdigit() else (1, part) for part in re.split(r"(\d+)", text) if part
+    )
+
+
+def validate_claims_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Return df as a claims table (columns CLAIMS_COLUMNS, str cells) or raise ReproError.
+
+    Checks: exactly the columns CLAIMS_COLUMNS (any order), no missing paper/claim/status,
+    every status in STATUSES, no duplicate (paper, claim).
+    """
+    columns = set(df.columns)
+    if columns != set(CLAIMS_COLUMNS) or len(df.columns) != len(CLAIMS_COLUMNS):
+        raise ReproError(
+            f"claims table has columns {list(df.columns)}, expected {list(CLAIMS_COLUMNS)}"
+        )
+    out = df.loc[:, list(CLAIMS_COLUMNS)].copy()
+    for name in ("paper", "claim", "status"):
+        empty = out[name].isna() | (out[name].astype(str).str.strip() == "")
+        if empty.any():
+            raise ReproError(
+                f"claims table has an empty {name!r} in row(s) {list(out.index[empty])}"
+            )
+    out = out.fillna("").astype(str).astype(object)
+    bad = sorted(set(out["status"]) - set(STATUSES))
+    if bad:
+        raise UnknownChoiceError("claim status", bad[0], STATUSES)
+    duplicated = out.duplicated(subset=["paper", "claim"])
+    if duplicated.any():
+        pairs = out.loc[duplicated, ["paper", "claim"]].itertuples(index=False)
+        raise ReproError(f"claims table has duplicate (paper, claim): {[tuple(p) for p in pairs]}")
+    return out.reset_index(drop=True)
+
+
+def read_claims_csv(path: Path) -> pd.DataFrame:
+    """Read and validate a claims CSV (all cells strings; an empty cell is "")."""
+    path = Path(path)
+    if not path.is_file():
+        raise ReproError(f"claims file {path} does not exist")
+    df = pd.read_csv(path, dtype=str, keep_default_na=False)
+    try:
+        return validate_claims_table(df)
+    except ReproError as exc:
+        raise ReproError(f"{path}: {exc}") from exc
+
+
+def write_claims_csv(df: pd.DataFrame, path: Path) -> None:
+    """Validate df and merge it into the claims CSV at path.
+
+    Rows of the papers present in df replace that paper's rows in the existing file; rows of
+    other papers are kept. The file is sorted by paper, then claim in natural order, and
+    replaced atomically.
+    """
+    path = Path(path)
+    new = validate_claims_table(df)
+    if path.exists():
+        old = read_claims_csv(path)
+        old = old[~old["paper"].isin(set(new["paper"]))]
+        merged = pd.concat([old, new], ignore_index=True)
+    else:
+        merged = new
+    records = sorted(
+        merged.itertuples(index=False, name=None),
+        key=lambda r: (r[0], natural_key(r[1])),
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(CLAIMS_COLUMNS)
+        writer.writerows(records)
+    os.replace(tmp, path)

@@ -1,0 +1,212 @@
+"""The experiment registry: papers and their experiments, found through entry points.
+
+Each paper package (``experiments/<paper>/``) exposes a :class:`Paper` and
+declares it in ``pyproject.toml``::
+
+    [project.entry-points."repro.experiments"]
+    thomas2024 = "experiments.thomas2024:EXPERIMENTS"
+
+``repro`` never imports ``experiments`` directly; :func:`load_papers` reads
+the ``repro.experiments`` entry-point group.
+
+Results layout: ``<results_dir>/<paper>/<name>/`` holds one experiment's trace
+files and its ``manifest.json`` (with at least ``status`` and ``config_hash``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from repro.errors import ReproError, UnknownChoiceError
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "Experiment",
+    "Paper",
+    "load_papers",
+    "find_experiment",
+    "all_experiments",
+    "experiment_dir",
+    "compute_config_hash",
+    "is_stale",
+]
+
+ENTRY_POINT_GROUP = "repro.experiments"
+MANIFEST_NAME = "manifest.json"
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One runnable experiment of a paper.
+
+    ``config_cls()`` gives the paper's default configuration (a frozen
+    dataclass). ``run(config, out_dir)`` writes trace files and a
+    ``manifest.json`` into ``out_dir`` (normally ``results/<paper>/<name>``)
+    and returns ``out_dir``. ``slow`` experiments are skipped by
+    ``repro results`` unless ``--include-slow`` is given.
+    """
+
+    name: str
+    paper: str
+    description: str
+    config_cls: type
+    run: Callable[[Any, Path], Path]
+    slow: bool = False
+
+    @property
+    def id(self) -> str:
+        """Full id ``"<paper>.<name>"``, e.g. ``"thomas2024.case1"``."""
+        return f"{self.paper}.{self.name}"
+
+
+@dataclass(frozen=True)
+class Paper:
+    """A reproduced paper: its experiments, figure builder and checked claims.
+
+    ``figures(results_dir, figures_dir)`` draws the paper's figures from the
+    traces and returns the written paths; ``claims()`` returns
+    ``repro.runs.claims.Claim`` objects.
+    """
+
+    key: str
+    experiments: tuple[Experiment, ...]
+    figures: Callable[[Path, Path], list[Path]] | None = None
+    claims: Callable[[], Sequence[Any]] | None = None
+
+
+# --------------------------------------------------------------------------- discovery
+
+
+def _entry_points(group: str) -> Iterable[metadata.EntryPoint]:
+    """The installed entry points of ``group`` (a seam for tests)."""
+    return metadata.entry_points(group=group)
+
+
+def load_papers() -> dict[str, Paper]:
+    """Every registered :class:`Paper`, keyed by ``paper.key``, in sorted key order.
+
+    Raises :class:`ReproError` naming the entry point if it cannot be imported,
+    is not a :class:`Paper`, or is inconsistent (key differs from the entry-point
+    name, an experiment names another paper, duplicate experiment names).
+    """
+    papers: dict[str, Paper] = {}
+    for ep in sorted(_entry_points(ENTRY_POINT_GROUP), key=lambda e: e.name):
+        try:
+            obj = ep.load()
+        except Exception as exc:
+            raise ReproError(
+                f"cannot load experiment entry point {ep.name!r} ({ep.value}): "
+                f"{type(exc).__name__}: {exc}"
+            ) from exc
+        _check_paper(ep.name, ep.value, obj)
+        if obj.key in papers:
+            raise ReproError(f"paper {obj.key!r} is registered twice (entry point {ep.name!r})")
+        papers[obj.key] = obj
+    return papers
+
+
+def _check_paper(ep_name: str, ep_value: str, obj: Any) -> None:
+    where = f"entry point {ep_name!r} ({ep_value})"
+    if not isinstance(obj, Paper):
+        raise ReproError(f"{where} must be a repro.runs.registry.Paper, got {type(obj).__name__}")
+    if obj.key != ep_name:
+        raise ReproError(f"{where} gives a Paper with key {obj.key!r}; expected {ep_name!r}")
+    seen: set[str] = set()
+    for exp in obj.experiments:
+        if not isinstance(exp, Experiment):
+            raise ReproError(
+                f"{where}: experiments must be Experiment objects, got {type(exp).__name__}"
+            )
+        if exp.paper != obj.key:
+            raise ReproError(
+                f"{where}: experiment {exp.name!r} has paper={exp.paper!r}; expected {obj.key!r}"
+            )
+        if exp.name in seen:
+            raise ReproError(f"{where}: experiment name {exp.name!r} is used twice")
+        seen.add(exp.name)
+
+
+def all_experiments(papers: Mapping[str, Paper]) -> list[Experiment]:
+    """Every experiment of ``papers``, in paper order then declaration order."""
+    return [exp for paper in papers.values() for exp in paper.experiments]
+
+
+def find_experiment(papers: Mapping[str, Paper], name: str) -> Experiment:
+    """The experiment with full id ``name`` (``"thomas2024.case1"``) or unique bare name.
+
+    Raises :class:`UnknownChoiceError` listing every experiment id if ``name``
+    matches nothing or a bare name matches experiments of several papers.
+    """
+    experiments = all_experiments(papers)
+    ids = [exp.id for exp in experiments]
+    matches = [exp for exp in experiments if exp.id == name]
+    if not matches and "." not in name:
+        matches = [exp for exp in experiments if exp.name == name]
+    if len(matches) == 1:
+        return matches[0]
+    err = UnknownChoiceError("experiment", name, ids)
+    if len(matches) > 1:
+        err.args = (
+            f"ambiguous experiment {name!r}: it names "
+            f"{', '.join(exp.id for exp in matches)}; use the full id "
+            f"(valid choices: {', '.join(err.choices)})",
+        )
+    raise err
+
+
+# --------------------------------------------------------------------------- staleness
+
+
+def experiment_dir(results_dir: Path, exp: Experiment) -> Path:
+    """Default output directory of ``exp``: ``<results_dir>/<paper>/<name>``."""
+    return Path(results_dir) / exp.paper / exp.name
+
+
+def _fallback_config_hash(config: Any) -> str:
+    """sha256 hex digest of the canonical JSON of ``dataclasses.asdict(config)``."""
+    payload = json.dumps(
+        dataclasses.asdict(config), sort_keys=True, separators=(",", ":"), default=str
+    )
+    return hashlib.sha256(payload.encode("utf-8")).hexdigest()
+
+
+def compute_config_hash(config: Any) -> str:
+    """The hash recorded in manifests: ``repro.runs.trace.config_hash`` if available."""
+    try:
+        from repro.runs.trace import config_hash
+    except ImportError:
+        return _fallback_config_hash(config)
+    return str(config_hash(config))
+
+
+def is_stale(exp: Experiment, results_dir: Path, config: Any) -> tuple[bool, str]:
+    """Whether ``exp``'s trace under ``results_dir`` must be (re)made for ``config``.
+
+    Stale if ``<results_dir>/<paper>/<name>/manifest.json`` is missing or
+    unreadable, its ``status`` is not ``"completed"``, or its ``config_hash``
+    differs from the hash of ``config``. Returns ``(stale, reason)``.
+    """
+    manifest_path = experiment_dir(results_dir, exp) / MANIFEST_NAME
+    if not manifest_path.is_file():
+        return True, f"no manifest at {manifest_path}"
+    try:
+        manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        return True, f"unreadable manifest {manifest_path}: {exc}"
+    if not isinstance(manifest, dict):
+        return True, f"malformed manifest {manifest_path}: not a JSON object"
+    status = manifest.get("status")
+    if status != "completed":
+        return True, f"last run status is {status!r}, not 'completed'"
+    recorded = manifest.get("config_hash")
+    expected = compute_config_hash(config)
+    if recorded != expected:
+        return True, f"config changed (manifest hash {recorded!r}, current {expected!r})"
+    return False, f"fresh (completed, config hash {expected[:12]})"

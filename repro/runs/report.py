@@ -1,0 +1,455 @@
+"""REPORT.md, generated only from the files under results/ and figures/ (and source comments).
+
+Layout: provenance (live environment vs. what the run manifests recorded), an overview, then
+per paper its claims (from results/claims.csv), its runs (from every manifest.json under
+results/<paper>/), its figures (every PNG under figures/<paper>/), its benchmarks (from
+results/bench.csv) and the values we chose where the paper is silent (``# ours:`` comments).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+import tokenize
+import urllib.parse
+from collections.abc import Iterable, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from repro.errors import ReproError
+from repro.runs.claims import STATUSES, natural_key, read_claims_csv
+from repro.runs.trace import TRACKED_PACKAGES, environment, git_state
+
+__all__ = [
+    "BENCH_COLUMNS",
+    "OURS_COLUMNS",
+    "collect_ours",
+    "markdown_table",
+    "render_report",
+]
+
+OURS_COLUMNS = ("file", "line", "code", "why")
+BENCH_COLUMNS = ("benchmark", "median_s", "p95_s", "n", "machine")
+OURS_HEADING = "Values chosen by us (the papers are silent)"
+
+_OURS = re.compile(r"#\s*ours:\s*(?P<why>.*)$", re.IGNORECASE)
+_SKIP_DIRS = {".venv", "venv", "__pycache__", ".git", "build", ".mypy_cache", ".ruff_cache"}
+_MISSING = "—"
+
+
+# --------------------------------------------------------------------------- markdown
+
+
+def _cell(value: Any) -> str:
+    if value is None or (isinstance(value, float) and value != value):
+        return ""
+    text = str(value).replace("\r\n", "\n").replace("\n", "<br>")
+    return text.replace("|", "\\|")
+
+
+def markdown_table(headers: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
+    """A GitHub-flavoured Markdown table (pipes escaped, newlines as <br>), no dependency."""
+    lines = [
+        "| " + " | ".join(_cell(h) for h in headers) + " |",
+        "|" + "|".join("---" for _ in headers) + "|",
+    ]
+    for row in rows:
+        cells = list(row)
+        if len(cells) != len(headers):
+            raise ReproError(f"table row has {len(cells)} cells, expected {len(headers)}: {row}")
+        lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- "# ours:" scan
+
+
+def _source_files(paths: Sequence[Path]) -> list[Path]:
+    files: list[Path] = []
+    for path in map(Path, paths):
+        if path.is_dir():
+            files.extend(
+                p
+                for p in sorted(path.rglob("*.py"))
+                if not _SKIP_DIRS.intersection(p.relative_to(path).parts)
+            )
+        elif path.is_file():
+            files.append(path)
+        else:
+            raise ReproError(f"source path {path} does not exist")
+    return files
+
+
+def _comment_lines(text: str, is_python: bool) -> list[tuple[int, int, str]]:
+    """(line number, column, comment text) of every comment; real tokens for Python files."""
+    if is_python:
+        try:
+            tokens = tokenize.generate_tokens(io.StringIO(text).readline)
+            return [
+                (tok.start[0], tok.start[1], tok.string)
+                for tok in tokens
+                if tok.type == tokenize.COMMENT
+            ]
+        except (tokenize.TokenError, SyntaxError):
+            pass  # fall back to a plain text scan
+    out = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        match = _OURS.search(line)
+        if match:
+            out.append((number, match.start(), line[match.start() :]))
+    return out
+
+
+def collect_ours(paths: Sequence[Path]) -> pd.DataFrame:
+    """Every ``# ours: <why>`` comment in the given files (directories: their *.py files).
+
+    A ``# ours:`` comment marks a value the paper does not give. For a comment after code, the
+    code is that line's code; for a comment on its own line, the next code line.
+
+    Returns:
+        Columns OURS_COLUMNS: file (path as given, posix), line (1-based, of the comment),
+        code (stripped), why (text after "# ours:").
+    """
+    rows = []
+    for path in _source_files(paths):
+        text = path.read_text(encoding="utf-8", errors="replace")
+        lines = text.splitlines()
+        for number, column, comment in _comment_lines(text, path.suffix == ".py"):
+            match = _OURS.match(comment.strip())
+            if not match:
+                continue
+            code = lines[number - 1][:column].strip() if number <= len(lines) else ""
+            if not code:
+                for following in lines[number:]:
+                    stripped = following.strip()
+                    if stripped and not stripped.startswith("#"):
+                        code = stripped
+                        break
+            rows.append((path.as_posix(), number, code, match.group("why").strip()))
+    df = pd.DataFrame(rows, columns=list(OURS_COLUMNS))
+    return df.astype({"line": "int64"})
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def _read_manifests(paper_dir: Path) -> list[tuple[str, dict[str, Any]]]:
+    runs = []
+    for manifest_path in paper_dir.rglob("manifest.json"):
+        run = manifest_path.parent.relative_to(paper_dir).as_posix()
+        try:
+            manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
+            if not isinstance(manifest, dict):
+                raise ValueError("not a JSON object")
+        except (OSError, ValueError) as exc:
+            manifest = {"status": "unreadable manifest", "reason": str(exc)}
+        runs.append((run, manifest))
+    return sorted(runs, key=lambda item: natural_key(item[0]))
+
+
+def _read_bench(path: Path) -> pd.DataFrame | None:
+    if not path.is_file():
+        return None
+    bench = pd.read_csv(path)
+    missing = [c for c in BENCH_COLUMNS if c not in bench.columns]
+    if missing:
+        raise ReproError(
+            f"{path} lacks column(s) {missing}; expected at least {list(BENCH_COLUMNS)}"
+        )
+    return bench
+
+
+def _discover_papers(
+    results_dir: Path, figures_dir: Path, claims: pd.DataFrame | None
+) -> list[str]:
+    papers: set[str] = set()
+    if results_dir.is_dir():
+        papers.update(
+            d.name
+            for d in results_dir.iterdir()
+            if d.is_dir() and not d.name.startswith(".") and any(d.rglob("manifest.json"))
+        )
+    if figures_dir.is_dir():
+        papers.update(
+            d.name
+            for d in figures_dir.iterdir()
+            if d.is_dir() and not d.name.startswith(".") and any(d.rglob("*.png"))
+        )
+    if claims is not None:
+        papers.update(claims["paper"])
+    return sorted(papers)
+
+
+# --------------------------------------------------------------------------- formatting
+
+
+def _fmt_num(value: Any, fmt: str = "{:.4g}") -> str:
+    if value is None or isinstance(value, str):
+        return _MISSING if value is None else value
+    try:
+        return fmt.format(value)
+    except (TypeError, ValueError):
+        return str(value)
+
+
+def _fmt_sha(sha: Any, dirty: Any) -> str:
+    if not sha:
+        return _MISSING
+    return str(sha)[:10] + ("+dirty" if dirty else "")
+
+
+def _distinct(values: Iterable[Any]) -> str:
+    seen = sorted({str(v) for v in values if v is not None and v != ""})
+    return ", ".join(seen) if seen else _MISSING
+
+
+def _link(target: Path, base: Path) -> str:
+    try:
+        rel = os.path.relpath(target.resolve(), base.resolve())
+    except ValueError:  # different drives on Windows
+        rel = str(target.resolve())
+    return urllib.parse.quote(Path(rel).as_posix())
+
+
+def _display_path(file: str, base: Path) -> str:
+    path = Path(file)
+    try:
+        return path.resolve().relative_to(base.resolve()).as_posix()
+    except ValueError:
+        return path.as_posix()
+
+
+def _provenance(
+    manifests: list[dict[str, Any]], now: datetime, source_paths: Sequence[Path]
+) -> list[str]:
+    env = environment()
+    sha, dirty = None, None
+    for hint in [*(Path(p) for p in source_paths), None]:  # None: the repro package's checkout
+        sha, dirty = git_state(hint)
+        if sha is not None:
+            break
+    started = sorted(str(m["started_at"]) for m in manifests if m.get("started_at"))
+    run_dates = f"{started[0]} … {started[-1]}" if started else _MISSING
+    run_shas = _distinct(_fmt_sha(m.get("git_sha"), m.get("git_dirty")) for m in manifests)
+    rows = [
+        ("date (UTC)", now.astimezone(UTC).isoformat(timespec="seconds"), run_dates),
+        ("git sha", _fmt_sha(sha, dirty), run_shas),
+        ("python", env["python"], _distinct(m.get("python") for m in manifests)),
+        ("platform", env["platform"], _distinct(m.get("platform") for m in manifests)),
+        ("CPU", env["cpu"], _distinct(m.get("cpu") for m in manifests)),
+        ("repro", env["repro_version"], _distinct(m.get("repro_version") for m in manifests)),
+    ]
+    for package in TRACKED_PACKAGES:
+        recorded = _distinct((m.get("packages") or {}).get(package) for m in manifests)
+        rows.append((package, env["packages"].get(package, _MISSING), recorded))
+    return [
+        "## Provenance",
+        "",
+        f"{len(manifests)} run manifest(s) read. The first column is the environment that "
+        "generated this report; the second lists every distinct value the runs recorded.",
+        "",
+        markdown_table(("item", "report environment", "recorded by the runs"), rows),
+        "",
+    ]
+
+
+def _claims_counts(claims: pd.DataFrame) -> dict[str, int]:
+    return {status: int((claims["status"] == status).sum()) for status in STATUSES}
+
+
+def _inline_code(code: str) -> str:
+    if not code:
+        return ""
+    fence = "``" if "`" in code else "`"
+    pad = " " if "`" in code else ""
+    return f"{fence}{pad}{code}{pad}{fence}"
+
+
+def _ours_table(ours: pd.DataFrame, base: Path) -> str:
+    if ours.empty:
+        return "_None recorded._"
+    rows = [
+        (_display_path(r.file, base), r.line, _inline_code(r.code), r.why)
+        for r in ours.itertuples(index=False)
+    ]
+    return markdown_table(OURS_COLUMNS, rows)
+
+
+def _bench_table(bench: pd.DataFrame) -> str:
+    rows = [
+        (r["benchmark"], _fmt_num(r["median_s"]), _fmt_num(r["p95_s"]), r["n"], r["machine"])
+        for _, r in bench.iterrows()
+    ]
+    return markdown_table(BENCH_COLUMNS, rows)
+
+
+def _paper_section(
+    paper: str,
+    *,
+    results_dir: Path,
+    figures_dir: Path,
+    base: Path,
+    claims: pd.DataFrame | None,
+    runs: list[tuple[str, dict[str, Any]]],
+    bench: pd.DataFrame | None,
+    ours: pd.DataFrame,
+) -> list[str]:
+    out = [f"## {paper}", ""]
+
+    out += ["### Claims", ""]
+    paper_claims = None if claims is None else claims[claims["paper"] == paper]
+    if paper_claims is None or paper_claims.empty:
+        out += ["_No claims evaluated for this paper._", ""]
+    else:
+        counts = _claims_counts(paper_claims)
+        out += [
+            f"**{counts['reproduced']} of {len(paper_claims)} reproduced** "
+            f"({counts['not_reproduced']} not reproduced, {counts['not_run']} not run).",
+            "",
+            markdown_table(paper_claims.columns, paper_claims.itertuples(index=False)),
+            "",
+        ]
+
+    out += ["### Runs", ""]
+    if not runs:
+        out += [f"_No runs under {_link(results_dir / paper, base)}._", ""]
+    else:
+        rows = [
+            (
+                run,
+                m.get("experiment", _MISSING),
+                m.get("status", _MISSING),
+                m.get("reason", ""),
+                m.get("n_rows", _MISSING),
+                _fmt_num(m.get("wall_time_s"), "{:.2f}"),
+                str(m.get("config_hash") or _MISSING)[:12],
+                _fmt_sha(m.get("git_sha"), m.get("git_dirty")),
+            )
+            for run, m in runs
+        ]
+        headers = ("run", "experiment", "status", "reason", "rows", "wall time (s)")
+        out += [markdown_table((*headers, "config hash", "git sha"), rows), ""]
+
+    out += ["### Figures", ""]
+    paper_figures = figures_dir / paper
+    pngs = sorted(paper_figures.rglob("*.png"), key=lambda p: natural_key(p.as_posix()))
+    if not pngs:
+        out += ["_No figures._", ""]
+    for png in pngs:
+        name = png.relative_to(paper_figures).with_suffix("").as_posix()
+        out += [f"![{name}]({_link(png, base)})", ""]
+
+    if bench is not None and "paper" in bench.columns:
+        paper_bench = bench[bench["paper"] == paper]
+        if not paper_bench.empty:
+            out += ["### Benchmarks", "", _bench_table(paper_bench), ""]
+
+    out += [f"### {OURS_HEADING}", "", _ours_table(ours, base), ""]
+    return out
+
+
+def render_report(
+    results_dir: Path,
+    figures_dir: Path,
+    source_paths: Sequence[Path],
+    out_path: Path,
+    *,
+    papers: Sequence[str] | None = None,
+    now: datetime | None = None,
+) -> Path:
+    """Write REPORT.md at out_path from results_dir, figures_dir and the sources' ``# ours:``.
+
+    Args:
+        results_dir: holds claims.csv, bench.csv (optional) and <paper>/<run>/manifest.json.
+        figures_dir: holds <paper>/*.png.
+        source_paths: files or directories scanned for ``# ours:`` comments; a file belongs
+            to a paper when its path contains the paper key, otherwise to the shared library.
+        out_path: the report to write (links are relative to its directory).
+        papers: paper keys, in order; default: every paper found in results, figures, claims.
+        now: generation time (default: now, UTC).
+
+    Returns:
+        out_path.
+    """
+    results_dir, figures_dir, out_path = Path(results_dir), Path(figures_dir), Path(out_path)
+    base = out_path.parent
+    claims_path = results_dir / "claims.csv"
+    claims = read_claims_csv(claims_path) if claims_path.is_file() else None
+    bench = _read_bench(results_dir / "bench.csv")
+    paper_keys = (
+        list(papers) if papers is not None else _discover_papers(results_dir, figures_dir, claims)
+    )
+    runs = {p: _read_manifests(results_dir / p) for p in paper_keys}
+    all_manifests = [m for p in paper_keys for _, m in runs[p]]
+    ours = collect_ours(source_paths)
+    owner = ours["file"].map(lambda f: next((p for p in paper_keys if p in f), ""))
+
+    lines = [
+        "# Reproduction report",
+        "",
+        "Generated by `repro.runs.report` from the files under "
+        f"`{_link(results_dir, base)}/` and `{_link(figures_dir, base)}/`; do not edit by hand.",
+        "",
+    ]
+    lines += _provenance(all_manifests, now or datetime.now(UTC), source_paths)
+
+    overview = []
+    for paper in paper_keys:
+        paper_claims = None if claims is None else claims[claims["paper"] == paper]
+        n_claims = 0 if paper_claims is None else len(paper_claims)
+        counts = _claims_counts(paper_claims) if n_claims else dict.fromkeys(STATUSES, 0)
+        completed = sum(1 for _, m in runs[paper] if m.get("status") == "completed")
+        overview.append(
+            (
+                paper,
+                f"{counts['reproduced']} of {n_claims}",
+                counts["not_reproduced"],
+                counts["not_run"],
+                f"{completed} of {len(runs[paper])}",
+            )
+        )
+    lines += [
+        "## Overview",
+        "",
+        markdown_table(
+            ("paper", "reproduced", "not reproduced", "not run", "runs completed"), overview
+        )
+        if overview
+        else "_No papers found._",
+        "",
+    ]
+    if claims is None:
+        lines += [f"_No claims table ({_link(claims_path, base)} is missing)._", ""]
+
+    for paper in paper_keys:
+        lines += _paper_section(
+            paper,
+            results_dir=results_dir,
+            figures_dir=figures_dir,
+            base=base,
+            claims=claims,
+            runs=runs[paper],
+            bench=bench,
+            ours=ours[owner == paper],
+        )
+
+    if bench is not None and "paper" not in bench.columns:
+        lines += ["## Benchmarks", "", _bench_table(bench), ""]
+
+    lines += [
+        f"## {OURS_HEADING}: shared library",
+        "",
+        _ours_table(ours[owner == ""], base),
+        "",
+    ]
+
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_path.with_name(out_path.name + ".tmp")
+    tmp.write_text("\n".join(lines).rstrip() + "\n", encoding="utf-8")
+    os.replace(tmp, out_path)
+    return out_path

@@ -1,0 +1,630 @@
+"""Tidy, self-describing trace of one experiment run.
+
+A run directory holds four files that can be audited or replayed without repro:
+
+- ``trace.csv``: one row per control step, fixed column order (set by the first row).
+  Floats are written with ``repr`` (shortest round-trip form), so re-reading the file gives
+  bit-identical values. A missing value is an empty field (NaN when read back).
+- ``events.csv``: columns ``t`` (s, simulated time), ``step`` (control step index), ``kind``,
+  ``detail``; one row per discrete event, written and flushed immediately.
+- ``manifest.json``: what ran (experiment, paper, config and its hash, seed), how it ended
+  (status, reason), when and where (UTC times, wall time, Python, CPU, package versions,
+  git sha) and an optional ``summary`` set by the caller.
+- ``scene.json``: the simulated scene (bodies, poses...) as plain JSON.
+
+``manifest.json`` is written with status ``"running"`` when the recorder is created, so a
+process killed without unwinding (SIGKILL, power loss) leaves a run that claims treat as not
+completed rather than a stale manifest from an earlier run.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import enum
+import functools
+import hashlib
+import importlib.metadata
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from pathlib import Path
+from types import TracebackType
+from typing import Any, TextIO
+
+import numpy as np
+import pandas as pd
+
+from repro.errors import ConfigError, ReproError, UnknownChoiceError
+
+__all__ = [
+    "EVENTS_COLUMNS",
+    "FORMAT_VERSION",
+    "MANIFEST_KEYS",
+    "RUN_FILES",
+    "RUN_STATUSES",
+    "TRACKED_PACKAGES",
+    "RunFiles",
+    "TraceRecorder",
+    "config_hash",
+    "cpu_name",
+    "environment",
+    "git_state",
+    "load_run",
+    "package_versions",
+    "to_jsonable",
+]
+
+FORMAT_VERSION = 1
+"""Version of the run-directory layout; bump when a file's schema changes."""
+
+RUN_FILES = ("trace.csv", "events.csv", "manifest.json", "scene.json")
+EVENTS_COLUMNS = ("t", "step", "kind", "detail")
+
+RUN_STATUSES = ("completed", "crashed", "interrupted", "failed")
+"""Final statuses accepted by :meth:`TraceRecorder.close` (``"running"`` is only transient)."""
+
+TRACKED_PACKAGES = (
+    "pybullet",
+    "numpy",
+    "pin",
+    "proxsuite",
+    "osqp",
+    "casadi",
+    "python-fcl",
+    "opencv-python-headless",
+    "pandas",
+    "matplotlib",
+    "scipy",
+)
+NOT_INSTALLED = "not installed"
+
+MANIFEST_KEYS = (
+    "format_version",
+    "experiment",
+    "paper",
+    "status",
+    "reason",
+    "config",
+    "config_hash",
+    "seed",
+    "columns",
+    "n_rows",
+    "n_events",
+    "started_at",
+    "ended_at",
+    "wall_time_s",
+    "python",
+    "platform",
+    "cpu",
+    "packages",
+    "git_sha",
+    "git_dirty",
+    "repro_version",
+    "summary",
+)
+"""Keys of manifest.json, in the order they are written."""
+
+# Paths whose changes do not make the code "dirty": run outputs are committed too.
+_GIT_OUTPUT_PATHSPECS = (
+    ":(top,exclude)results",
+    ":(top,exclude)figures",
+    ":(top,exclude)REPORT.md",
+)
+
+Scalar = float | int | str | bool
+
+
+# --------------------------------------------------------------------------- JSON helpers
+
+
+def to_jsonable(obj: Any) -> Any:
+    """Convert ``obj`` to plain JSON types (dict with str keys, list, str, int, float, bool, None).
+
+    Dataclasses become dicts of their fields, tuples/sets become lists, numpy arrays and
+    scalars become lists / Python scalars, paths and enums their string / value. Non-finite
+    floats become the strings ``"nan"``, ``"inf"``, ``"-inf"`` so the output is strict JSON.
+
+    Raises:
+        ReproError: if a value has no JSON form (e.g. a function or an arbitrary object).
+    """
+    return _jsonable(obj, "$")
+
+
+def _jsonable(obj: Any, where: str) -> Any:
+    if obj is None or isinstance(obj, bool | str):
+        return obj
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, int | np.integer):
+        return int(obj)
+    if isinstance(obj, float | np.floating):
+        value = float(obj)
+        return value if math.isfinite(value) else repr(value)
+    if isinstance(obj, enum.Enum):
+        return _jsonable(obj.value, where)
+    if isinstance(obj, Path):
+        return obj.as_posix()
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {
+            f.name: _jsonable(getattr(obj, f.name), f"{where}.{f.name}")
+            for f in dataclasses.fields(obj)
+        }
+    if isinstance(obj, Mapping):
+        out: dict[str, Any] = {}
+        for key, value in obj.items():
+            if not isinstance(key, str | int | float | bool | enum.Enum):
+                raise ReproError(f"cannot write a JSON key of type {type(key).__name__} at {where}")
+            name = str(key.value) if isinstance(key, enum.Enum) else str(key)
+            out[name] = _jsonable(value, f"{where}.{name}")
+        return out
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist(), where)
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v, f"{where}[{i}]") for i, v in enumerate(obj)]
+    if isinstance(obj, set | frozenset):
+        return sorted((_jsonable(v, where) for v in obj), key=repr)
+    raise ReproError(
+        f"cannot write a value of type {type(obj).__name__} at {where} as JSON: {obj!r}"
+    )
+
+
+def _canonical_json(obj: Any) -> str:
+    return json.dumps(
+        to_jsonable(obj), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False
+    )
+
+
+def config_hash(config: Any) -> str:
+    """Return the sha256 hex digest of the canonical JSON of ``config``.
+
+    ``config`` is a dataclass instance or a mapping. Canonical JSON: :func:`to_jsonable`,
+    sorted keys, no whitespace, ASCII. Field order and tuple-vs-list do not change the hash;
+    any value change does. The class name is not part of the hash.
+    """
+    _check_config(config)
+    return hashlib.sha256(_canonical_json(config).encode("ascii")).hexdigest()
+
+
+def _check_config(config: Any) -> None:
+    is_instance = dataclasses.is_dataclass(config) and not isinstance(config, type)
+    if not (is_instance or isinstance(config, Mapping)):
+        raise ConfigError(
+            f"config must be a dataclass instance or a mapping, got {type(config).__name__}"
+        )
+
+
+def _write_json_atomic(path: Path, obj: Any) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+# --------------------------------------------------------------------------- environment
+
+
+@functools.lru_cache(maxsize=1)
+def package_versions() -> dict[str, str]:
+    """Installed version of each of :data:`TRACKED_PACKAGES` (``"not installed"`` if absent)."""
+    versions = {}
+    for name in TRACKED_PACKAGES:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = NOT_INSTALLED
+    return versions
+
+
+@functools.lru_cache(maxsize=1)
+def cpu_name() -> str:
+    """Human-readable CPU model (from /proc/cpuinfo on Linux), with the logical core count."""
+    name = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
+            if line.lower().startswith(("model name", "hardware", "cpu model")):
+                name = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    if not name:
+        name = platform.processor() or platform.machine() or "unknown"
+    return f"{name} ({os.cpu_count()} logical cores)"
+
+
+@functools.lru_cache(maxsize=1)
+def _repro_version() -> str:
+    try:
+        return importlib.metadata.version("repro")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def environment() -> dict[str, Any]:
+    """The live environment: python, platform, cpu, packages, repro_version."""
+    return {
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        "cpu": cpu_name(),
+        "packages": dict(package_versions()),
+        "repro_version": _repro_version(),
+    }
+
+
+def git_state(path: Path | None = None) -> tuple[str | None, bool | None]:
+    """Return ``(sha, dirty)`` of the git checkout containing ``path``, ``(None, None)`` if none.
+
+    ``path`` defaults to the directory of the repro package. ``dirty`` is True when tracked or
+    untracked files differ from HEAD, ignoring run outputs (results/, figures/, REPORT.md).
+    Uses ``--no-optional-locks`` so it never takes the index lock of a concurrent commit.
+    """
+    cwd = Path(path) if path is not None else Path(__file__).resolve().parents[1]
+    if cwd.is_file():
+        cwd = cwd.parent
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", "--no-optional-locks", *args],
+            cwd=cwd,
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=20,
+        ).stdout
+
+    try:
+        sha = git("rev-parse", "HEAD").strip()
+    except (OSError, subprocess.SubprocessError):
+        return None, None
+    try:
+        dirty: bool | None = bool(
+            git("status", "--porcelain", "--", *_GIT_OUTPUT_PATHSPECS).strip()
+        )
+    except (OSError, subprocess.SubprocessError):
+        dirty = None
+    return sha or None, dirty
+
+
+def _utc_now() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+# --------------------------------------------------------------------------- recorder
+
+
+def _format_cell(value: Any, key: str) -> str:
+    """CSV text of one trace value; floats via repr so they round-trip bit-identically."""
+    if value is None:
+        return ""
+    if isinstance(value, bool | np.bool_):
+        return "True" if value else "False"
+    if isinstance(value, int | np.integer):
+        return str(int(value))
+    if isinstance(value, float | np.floating):
+        return repr(float(value))
+    if isinstance(value, str):
+        return value
+    raise ReproError(
+        f"trace column {key!r}: value of type {type(value).__name__} is not a scalar "
+        f"(float, int, str or bool): {value!r}"
+    )
+
+
+class TraceRecorder:
+    """Writes one run's files into out_dir: trace.csv, events.csv, manifest.json, scene.json.
+
+    Use as a context manager so a crash or Ctrl-C still closes the run with status
+    ``"crashed"`` / ``"interrupted"`` and the reason::
+
+        with TraceRecorder(out, experiment="reach", paper="thomas2024", config=cfg, seed=0) as rec:
+            for k in range(n):
+                rec.record({"t": k * dt, "step": k, "err_m": err})
+            rec.summary["final_err_m"] = err
+
+    Args:
+        out_dir: run directory (created if needed; files of an earlier run are overwritten).
+        experiment: experiment name.
+        paper: paper key (e.g. "thomas2024").
+        config: the run's configuration, a dataclass instance (a mapping is accepted too).
+        seed: random seed of the run.
+        flush_every: trace rows are written to disk every this many rows (and on close).
+    """
+
+    def __init__(
+        self,
+        out_dir: Path,
+        *,
+        experiment: str,
+        paper: str,
+        config: Any,
+        seed: int,
+        flush_every: int = 50,
+    ) -> None:
+        if not experiment or not isinstance(experiment, str):
+            raise ConfigError(f"experiment must be a non-empty string, got {experiment!r}")
+        if not paper or not isinstance(paper, str):
+            raise ConfigError(f"paper must be a non-empty string, got {paper!r}")
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+            raise ConfigError(f"seed must be an int, got {seed!r}")
+        if isinstance(flush_every, bool) or not isinstance(flush_every, int) or flush_every < 1:
+            raise ConfigError(f"flush_every must be an int >= 1, got {flush_every!r}")
+        _check_config(config)
+
+        self.out_dir = Path(out_dir)
+        self.experiment = experiment
+        self.paper = paper
+        self.seed = int(seed)
+        self.flush_every = flush_every
+        self.summary: dict[str, Any] = {}
+        """Caller-set results written into manifest.json at close (JSON-able values)."""
+
+        self._config_json = to_jsonable(config)
+        self._config_hash = config_hash(config)
+        self._columns: tuple[str, ...] | None = None
+        self._column_set: frozenset[str] = frozenset()
+        self._pending: list[list[str]] = []
+        self._n_rows = 0
+        self._n_events = 0
+        self._closed = False
+        self._manifest_path = self.out_dir / "manifest.json"
+        self._started_at = _utc_now()
+        self._t0 = time.perf_counter()
+        self._git_sha, self._git_dirty = git_state()
+
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self._trace_file: TextIO = open(  # closed in close()
+            self.out_dir / "trace.csv", "w", newline="", encoding="utf-8"
+        )
+        self._trace_writer = csv.writer(self._trace_file, lineterminator="\n")
+        self._events_file: TextIO = open(  # closed in close()
+            self.out_dir / "events.csv", "w", newline="", encoding="utf-8"
+        )
+        self._events_writer = csv.writer(self._events_file, lineterminator="\n")
+        self._events_writer.writerow(EVENTS_COLUMNS)
+        self._events_file.flush()
+        self._scene_written = False
+        scene_path = self.out_dir / "scene.json"
+        if scene_path.exists():
+            scene_path.unlink()
+        self._write_manifest(status="running", reason="", ended_at=None, wall_time_s=None)
+
+    # ------------------------------------------------------------------ properties
+
+    @property
+    def columns(self) -> tuple[str, ...] | None:
+        """The trace schema (column order), None before the first row."""
+        return self._columns
+
+    @property
+    def n_rows(self) -> int:
+        """Number of trace rows recorded so far (flushed or not)."""
+        return self._n_rows
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    @property
+    def manifest_path(self) -> Path:
+        return self._manifest_path
+
+    # ------------------------------------------------------------------ recording
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ReproError(f"run {self.out_dir} is closed; cannot record into it")
+
+    def record(self, row: Mapping[str, float | int | str | bool]) -> None:
+        """Append one trace row (one control step).
+
+        The first row fixes the schema (its keys, in order). Later rows may omit keys (written
+        empty, read back as NaN) but may not add any.
+
+        Raises:
+            ReproError: on a key not in the schema, a non-scalar value, or a closed recorder.
+        """
+        self._check_open()
+        if self._columns is None:
+            if not row:
+                raise ReproError("the first trace row must have at least one column")
+            for key in row:
+                if not isinstance(key, str) or not key:
+                    raise ReproError(f"trace column names must be non-empty strings, got {key!r}")
+            self._columns = tuple(row)
+            self._column_set = frozenset(self._columns)
+            self._trace_writer.writerow(self._columns)
+        else:
+            unknown = [key for key in row if key not in self._column_set]
+            if unknown:
+                raise ReproError(
+                    f"trace row has column(s) {', '.join(map(repr, unknown))} not in the schema "
+                    f"fixed by the first row: {', '.join(self._columns)}"
+                )
+        self._pending.append(
+            [_format_cell(row[key], key) if key in row else "" for key in self._columns]
+        )
+        self._n_rows += 1
+        if len(self._pending) >= self.flush_every:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the buffered trace rows to disk."""
+        if self._trace_file.closed:
+            return
+        self._trace_writer.writerows(self._pending)
+        self._pending.clear()
+        self._trace_file.flush()
+
+    def event(self, t: float, step: int, kind: str, detail: str = "") -> None:
+        """Append a row to events.csv and flush it at once.
+
+        Args:
+            t: simulated time of the event (s).
+            step: control-step index.
+            kind: short event type, e.g. "contact", "goal_reached".
+            detail: free text.
+        """
+        self._check_open()
+        if not isinstance(kind, str) or not kind:
+            raise ReproError(f"event kind must be a non-empty string, got {kind!r}")
+        if not isinstance(detail, str):
+            raise ReproError(f"event detail must be a string, got {type(detail).__name__}")
+        self._events_writer.writerow(
+            [_format_cell(float(t), "t"), _format_cell(int(step), "step"), kind, detail]
+        )
+        self._events_file.flush()
+        self._n_events += 1
+
+    def set_scene(self, scene: Mapping[str, Any]) -> None:
+        """Write scene.json (replacing it atomically); call again with the updated mapping.
+
+        Numpy arrays become lists, tuples lists, non-finite floats strings (see to_jsonable).
+        """
+        self._check_open()
+        if not isinstance(scene, Mapping):
+            raise ReproError(f"scene must be a mapping, got {type(scene).__name__}")
+        _write_json_atomic(self.out_dir / "scene.json", to_jsonable(scene))
+        self._scene_written = True
+
+    # ------------------------------------------------------------------ closing
+
+    def _write_manifest(
+        self, *, status: str, reason: str, ended_at: str | None, wall_time_s: float | None
+    ) -> None:
+        env = environment()
+        try:
+            summary = to_jsonable(self.summary)
+        except ReproError as exc:  # never lose the manifest over an odd summary value
+            summary = {str(k): repr(v) for k, v in self.summary.items()}
+            summary["_summary_error"] = str(exc)
+        manifest = {
+            "format_version": FORMAT_VERSION,
+            "experiment": self.experiment,
+            "paper": self.paper,
+            "status": status,
+            "reason": reason,
+            "config": self._config_json,
+            "config_hash": self._config_hash,
+            "seed": self.seed,
+            "columns": list(self._columns or ()),
+            "n_rows": self._n_rows,
+            "n_events": self._n_events,
+            "started_at": self._started_at,
+            "ended_at": ended_at,
+            "wall_time_s": wall_time_s,
+            "python": env["python"],
+            "platform": env["platform"],
+            "cpu": env["cpu"],
+            "packages": env["packages"],
+            "git_sha": self._git_sha,
+            "git_dirty": self._git_dirty,
+            "repro_version": env["repro_version"],
+            "summary": summary,
+        }
+        _write_json_atomic(self._manifest_path, manifest)
+
+    def close(self, status: str = "completed", reason: str = "") -> Path:
+        """Flush the trace, write manifest.json and return its path. Idempotent.
+
+        Args:
+            status: one of RUN_STATUSES.
+            reason: why the run ended that way (free text; empty for a normal completion).
+        """
+        if self._closed:
+            return self._manifest_path
+        if status not in RUN_STATUSES:
+            raise UnknownChoiceError("run status", status, RUN_STATUSES)
+        self._closed = True
+        wall_time_s = time.perf_counter() - self._t0
+        try:
+            self.flush()
+        finally:
+            self._trace_file.close()
+            self._events_file.close()
+            if not self._scene_written:
+                _write_json_atomic(self.out_dir / "scene.json", {})
+            self._write_manifest(
+                status=status, reason=reason, ended_at=_utc_now(), wall_time_s=wall_time_s
+            )
+        return self._manifest_path
+
+    def __enter__(self) -> TraceRecorder:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            status = "interrupted" if issubclass(exc_type, KeyboardInterrupt) else "crashed"
+            self.close(status=status, reason=f"{exc_type.__name__}: {exc}")
+        # returning None re-raises the exception
+
+
+# --------------------------------------------------------------------------- loading
+
+
+@dataclasses.dataclass(frozen=True)
+class RunFiles:
+    """The four files of one run, read back."""
+
+    trace: pd.DataFrame
+    events: pd.DataFrame
+    manifest: dict[str, Any]
+    scene: dict[str, Any]
+
+
+def _read_csv_kwargs() -> dict[str, Any]:
+    # pandas >= 3 parses floats round-trip by default and deprecates the argument.
+    major = int(pd.__version__.split(".", 1)[0])
+    return {} if major >= 3 else {"float_precision": "round_trip"}
+
+
+def load_run(run_dir: Path) -> RunFiles:
+    """Read the four files of a run directory.
+
+    Raises:
+        ReproError: if the directory or one of its files is missing or unreadable.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise ReproError(f"run directory {run_dir} does not exist")
+    missing = [name for name in RUN_FILES if not (run_dir / name).is_file()]
+    if missing:
+        raise ReproError(f"run directory {run_dir} is missing {', '.join(missing)}")
+    try:
+        manifest = json.loads((run_dir / "manifest.json").read_text(encoding="utf-8"))
+        scene = json.loads((run_dir / "scene.json").read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ReproError(f"cannot read the JSON files of run {run_dir}: {exc}") from exc
+    trace_path = run_dir / "trace.csv"
+    try:
+        if trace_path.stat().st_size == 0:
+            trace = pd.DataFrame(columns=list(manifest.get("columns") or ()))
+        else:
+            trace = pd.read_csv(trace_path, **_read_csv_kwargs())
+        events = pd.read_csv(
+            run_dir / "events.csv",
+            dtype={"kind": str, "detail": str},
+            keep_default_na=False,
+            na_values={"t": ["nan", "NaN"]},
+            **_read_csv_kwargs(),
+        )
+    except (OSError, ValueError) as exc:
+        raise ReproError(f"cannot read the CSV files of run {run_dir}: {exc}") from exc
+    if tuple(events.columns) != EVENTS_COLUMNS:
+        raise ReproError(
+            f"{run_dir / 'events.csv'} has columns {list(events.columns)}, "
+            f"expected {list(EVENTS_COLUMNS)}"
+        )
+    events = events.astype({"t": float, "step": "int64"})
+    return RunFiles(trace=trace, events=events, manifest=manifest, scene=scene)

@@ -1,0 +1,244 @@
+"""A robot: the PyBullet body and a pinocchio model built from the same URDF.
+
+PyBullet simulates (contacts, motors); pinocchio gives frame poses and
+Jacobians analytically. Both load one URDF file, and the base is fixed at the
+world pose ``T_world_base``, so a frame pose from pinocchio and the matching
+PyBullet link pose agree (checked in tests/test_robot.py).
+
+Twist convention: a 6-vector ``(v, w)``, linear velocity first [m/s, rad/s].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pybullet as p
+
+from repro.errors import ConfigError, UnknownChoiceError
+from repro.sim.world import World, pb_to_pose, pose_to_pb
+
+JACOBIAN_FRAMES = ("local", "world", "local_world_aligned")
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Per-joint limits of the actuated joints, in the order of ``Robot.joint_names``.
+
+    Attributes:
+        q_min, q_max: position limits [rad].
+        qd_max: velocity limit magnitude [rad/s].
+        tau_max: torque limit magnitude [N m].
+    """
+
+    q_min: tuple[float, ...]
+    q_max: tuple[float, ...]
+    qd_max: tuple[float, ...]
+    tau_max: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        n = len(self.q_min)
+        for name in ("q_max", "qd_max", "tau_max"):
+            if len(getattr(self, name)) != n:
+                raise ConfigError(f"JointLimits.{name} has {len(getattr(self, name))} "
+                                  f"entries, expected {n}")
+
+
+class Robot:
+    """A fixed-base robot in a :class:`World`.
+
+    Args:
+        world: the world whose client holds the body.
+        urdf_path: URDF loaded by both PyBullet and pinocchio.
+        joint_names: the actuated joints, in control order.
+        limits: joint limits (used for motor forces and by controllers).
+        T_world_base: base pose in the world [m].
+    """
+
+    def __init__(
+        self,
+        world: World,
+        urdf_path: Path,
+        joint_names: tuple[str, ...],
+        limits: JointLimits,
+        T_world_base: np.ndarray | None = None,
+    ) -> None:
+        self.world = world
+        self.client = world.client
+        self.urdf_path = Path(urdf_path)
+        self.joint_names = tuple(joint_names)
+        self.limits = limits
+        self.T_world_base = np.eye(4) if T_world_base is None else np.asarray(T_world_base)
+        pos, quat = pose_to_pb(self.T_world_base)
+        self.body = p.loadURDF(
+            str(self.urdf_path), pos, quat, useFixedBase=True,
+            flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=self.client,
+        )
+        # PyBullet indices of joints and links (a link has the index of its parent joint).
+        self._pb_joint: dict[str, int] = {}
+        self._pb_link: dict[str, int] = {}
+        for j in range(p.getNumJoints(self.body, physicsClientId=self.client)):
+            info = p.getJointInfo(self.body, j, physicsClientId=self.client)
+            self._pb_joint[info[1].decode()] = j
+            self._pb_link[info[12].decode()] = j
+        self._pb_link[p.getBodyInfo(self.body, physicsClientId=self.client)[0].decode()] = -1
+        missing = [n for n in self.joint_names if n not in self._pb_joint]
+        if missing:
+            raise UnknownChoiceError("joint", missing[0], self._pb_joint)
+        self.pb_joints = [self._pb_joint[n] for n in self.joint_names]
+        self.n = len(self.joint_names)
+
+        self.model = pin.buildModelFromUrdf(str(self.urdf_path))
+        self.data = self.model.createData()
+        # Map control order -> pinocchio q index (all our joints are 1-DoF revolute/prismatic).
+        self._pin_q_idx = np.array(
+            [self.model.joints[self.model.getJointId(n)].idx_q for n in self.joint_names]
+        )
+        if self.model.nq != self.n:
+            raise ConfigError(
+                f"pinocchio model has nq={self.model.nq} but {self.n} controlled joints; "
+                "every non-fixed URDF joint must be controlled"
+            )
+        self._pin_q_cache: np.ndarray | None = None
+        self.velocity_mode()
+
+    # ------------------------------------------------------------------ state
+    def link_names(self) -> list[str]:
+        """Every link/frame name known to PyBullet."""
+        return list(self._pb_link)
+
+    def pb_link_index(self, link: str) -> int:
+        """PyBullet link index of ``link`` (-1 for the base)."""
+        if link not in self._pb_link:
+            raise UnknownChoiceError("link", link, self._pb_link)
+        return self._pb_link[link]
+
+    def q(self) -> np.ndarray:
+        """Joint positions [rad], control order."""
+        states = p.getJointStates(self.body, self.pb_joints, physicsClientId=self.client)
+        return np.array([s[0] for s in states])
+
+    def qd(self) -> np.ndarray:
+        """Joint velocities [rad/s], control order."""
+        states = p.getJointStates(self.body, self.pb_joints, physicsClientId=self.client)
+        return np.array([s[1] for s in states])
+
+    def reset(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
+        """Teleport the joints to ``q`` [rad] with velocities ``qd`` [rad/s] (default 0)."""
+        qd = np.zeros(self.n) if qd is None else qd
+        for j, qi, qdi in zip(self.pb_joints, q, qd, strict=True):
+            p.resetJointState(self.body, j, float(qi), float(qdi), physicsClientId=self.client)
+
+    # --------------------------------------------------------------- commands
+    def velocity_mode(self) -> None:
+        """Joint motors in velocity control, holding still until commanded."""
+        p.setJointMotorControlArray(
+            self.body, self.pb_joints, p.VELOCITY_CONTROL,
+            targetVelocities=[0.0] * self.n, forces=list(self.limits.tau_max),
+            physicsClientId=self.client,
+        )
+
+    def set_velocity_command(self, qd: np.ndarray) -> None:
+        """Command joint velocities [rad/s], clipped to the limits, motor force <= tau_max."""
+        qd_max = np.asarray(self.limits.qd_max)
+        qd = np.clip(np.asarray(qd, dtype=float), -qd_max, qd_max)
+        p.setJointMotorControlArray(
+            self.body, self.pb_joints, p.VELOCITY_CONTROL,
+            targetVelocities=qd.tolist(), forces=list(self.limits.tau_max),
+            physicsClientId=self.client,
+        )
+
+    def torque_mode(self) -> None:
+        """Release the velocity motors so that :meth:`set_torque_command` acts alone."""
+        p.setJointMotorControlArray(
+            self.body, self.pb_joints, p.VELOCITY_CONTROL,
+            targetVelocities=[0.0] * self.n, forces=[0.0] * self.n,
+            physicsClientId=self.client,
+        )
+
+    def set_torque_command(self, tau: np.ndarray) -> None:
+        """Command joint torques [N m], clipped to +-tau_max (call torque_mode() first)."""
+        tau_max = np.asarray(self.limits.tau_max)
+        tau = np.clip(np.asarray(tau, dtype=float), -tau_max, tau_max)
+        p.setJointMotorControlArray(
+            self.body, self.pb_joints, p.TORQUE_CONTROL, forces=tau.tolist(),
+            physicsClientId=self.client,
+        )
+
+    # ------------------------------------------------------------ kinematics
+    def _pin_q(self, q: np.ndarray) -> np.ndarray:
+        qp = np.zeros(self.model.nq)
+        qp[self._pin_q_idx] = q
+        return qp
+
+    def _update(self, q: np.ndarray) -> None:
+        q = np.asarray(q, dtype=float)
+        if self._pin_q_cache is not None and np.array_equal(q, self._pin_q_cache):
+            return
+        qp = self._pin_q(q)
+        pin.forwardKinematics(self.model, self.data, qp)
+        pin.computeJointJacobians(self.model, self.data, qp)
+        pin.updateFramePlacements(self.model, self.data)
+        self._pin_q_cache = q.copy()
+
+    def frame_id(self, frame: str) -> int:
+        """pinocchio frame id of a URDF link name."""
+        if not self.model.existFrame(frame):
+            raise UnknownChoiceError("frame", frame, [f.name for f in self.model.frames])
+        return self.model.getFrameId(frame)
+
+    def frame_pose(self, frame: str, q: np.ndarray) -> np.ndarray:
+        """T_world_frame (4x4) at joint positions ``q`` [rad] (pinocchio)."""
+        self._update(q)
+        return self.T_world_base @ self.data.oMf[self.frame_id(frame)].homogeneous
+
+    def frame_jacobian(self, frame: str, q: np.ndarray, reference: str = "local") -> np.ndarray:
+        """Geometric Jacobian (6 x n) of ``frame``: twist (v, w) = J qd.
+
+        reference:
+            ``"local"``: twist of the frame expressed in the frame itself
+            (linear velocity of the frame origin) -- the paper's J_N / eJ_e;
+            ``"local_world_aligned"``: velocity of the frame origin, axes of the world;
+            ``"world"``: spatial twist in the world frame (velocity of the point at the
+            world origin).
+        """
+        if reference not in JACOBIAN_FRAMES:
+            raise UnknownChoiceError("Jacobian reference", reference, JACOBIAN_FRAMES)
+        self._update(q)
+        rf = {
+            "local": pin.ReferenceFrame.LOCAL,
+            "world": pin.ReferenceFrame.WORLD,
+            "local_world_aligned": pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+        }[reference]
+        J = pin.getFrameJacobian(self.model, self.data, self.frame_id(frame), rf)
+        J = J[:, self._pin_q_idx]
+        if reference != "local":
+            R = self.T_world_base[:3, :3]
+            if reference == "world" and not np.allclose(self.T_world_base[:3, 3], 0.0):
+                raise ConfigError("world-frame Jacobians assume the base at the world origin")
+            J = np.vstack([R @ J[:3], R @ J[3:]])
+        return J
+
+    def pb_link_pose(self, link: str) -> np.ndarray:
+        """T_world_link (4x4) of the URDF link frame as PyBullet has it now."""
+        idx = self.pb_link_index(link)
+        if idx == -1:
+            pos, quat = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+            return pb_to_pose(pos, quat)
+        st = p.getLinkState(self.body, idx, computeForwardKinematics=True,
+                            physicsClientId=self.client)
+        return pb_to_pose(st[4], st[5])
+
+    def min_distance(self, other_body: int, max_distance: float = 1.0) -> float:
+        """Ground-truth minimum distance [m] between this robot and a body.
+
+        PyBullet closest points on the collision geometry; negative means
+        penetration; ``max_distance`` when nothing is closer than that.
+        """
+        pts = p.getClosestPoints(self.body, other_body, max_distance,
+                                 physicsClientId=self.client)
+        if not pts:
+            return max_distance
+        return float(min(pt[8] for pt in pts))

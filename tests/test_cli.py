@@ -1,0 +1,434 @@
+"""repro.runs.registry and repro.cli, against fake papers (never the real entry points)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import types
+from dataclasses import dataclass, replace
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from repro import cli
+from repro.config import param
+from repro.errors import ReproError, SolverError, UnknownChoiceError
+from repro.runs import registry
+from repro.runs.registry import Experiment, Paper, find_experiment, is_stale
+
+
+@dataclass(frozen=True)
+class FakeCfg:
+    gain: float = param(0.4, unit="1/s", range=(0.0, None), help="IBVS gain")
+    solver: str = param("proxsuite", choices=("proxsuite", "osqp"))
+    video: bool = param(False)
+
+
+@dataclass(frozen=True)
+class NoVideoCfg:
+    steps: int = param(10, range=(1, None))
+
+
+class Runner:
+    """A fake ``Experiment.run`` recording its calls and writing a completed manifest."""
+
+    def __init__(self, status: str = "completed", error: Exception | None = None) -> None:
+        self.calls: list[tuple[Any, Path]] = []
+        self.status = status
+        self.error = error
+
+    def __call__(self, config: Any, out_dir: Path) -> Path:
+        self.calls.append((config, out_dir))
+        if self.error is not None:
+            raise self.error
+        manifest = {"status": self.status, "config_hash": registry.compute_config_hash(config)}
+        (out_dir / "manifest.json").write_text(json.dumps(manifest))
+        return out_dir
+
+
+@pytest.fixture
+def runners() -> dict[str, Runner]:
+    return {k: Runner() for k in ("fake.case1", "fake.case2", "other.case1", "other.case3")}
+
+
+def _papers(runners: dict[str, Runner]) -> dict[str, Paper]:
+    def exp(paper: str, name: str, cfg: type, slow: bool = False) -> Experiment:
+        return Experiment(
+            name=name,
+            paper=paper,
+            description=f"{paper} {name} description\nsecond line",
+            config_cls=cfg,
+            run=runners[f"{paper}.{name}"],
+            slow=slow,
+        )
+
+    return {
+        "fake": Paper(
+            "fake", (exp("fake", "case1", FakeCfg), exp("fake", "case2", NoVideoCfg, slow=True))
+        ),
+        "other": Paper(
+            "other", (exp("other", "case1", FakeCfg), exp("other", "case3", NoVideoCfg))
+        ),
+    }
+
+
+@pytest.fixture
+def papers(monkeypatch, runners) -> dict[str, Paper]:
+    papers = _papers(runners)
+    monkeypatch.setattr(registry, "load_papers", lambda: papers)
+    return papers
+
+
+# --------------------------------------------------------------------------- registry
+
+
+def test_experiment_id(papers):
+    assert papers["fake"].experiments[0].id == "fake.case1"
+
+
+def test_find_experiment_full_and_bare(papers):
+    assert find_experiment(papers, "fake.case1") is papers["fake"].experiments[0]
+    assert find_experiment(papers, "case3") is papers["other"].experiments[1]
+    assert find_experiment(papers, "case2").id == "fake.case2"
+
+
+def test_find_experiment_unknown_lists_all_ids(papers):
+    with pytest.raises(UnknownChoiceError) as info:
+        find_experiment(papers, "nope")
+    assert info.value.choices == ["fake.case1", "fake.case2", "other.case1", "other.case3"]
+    assert "fake.case1, fake.case2, other.case1, other.case3" in str(info.value)
+    with pytest.raises(UnknownChoiceError):
+        find_experiment(papers, "fake.case3")  # a full id is never matched as a bare name
+
+
+def test_find_experiment_ambiguous(papers):
+    with pytest.raises(UnknownChoiceError) as info:
+        find_experiment(papers, "case1")
+    msg = str(info.value)
+    assert "ambiguous" in msg and "fake.case1, other.case1" in msg
+    assert "other.case3" in msg  # still lists every valid choice
+
+
+def _entry_points(monkeypatch, **values: str) -> None:
+    eps = [
+        metadata.EntryPoint(name=name, value=value, group=registry.ENTRY_POINT_GROUP)
+        for name, value in values.items()
+    ]
+    monkeypatch.setattr(registry, "_entry_points", lambda group: eps)
+
+
+def test_load_papers_from_entry_points(monkeypatch, runners):
+    module = types.ModuleType("fake_repro_papers")
+    module.FAKE = _papers(runners)["fake"]
+    module.OTHER = _papers(runners)["other"]
+    monkeypatch.setitem(sys.modules, "fake_repro_papers", module)
+    _entry_points(monkeypatch, other="fake_repro_papers:OTHER", fake="fake_repro_papers:FAKE")
+    papers = registry.load_papers()
+    assert list(papers) == ["fake", "other"]
+    assert papers["fake"] is module.FAKE
+
+
+def test_load_papers_broken_entry_point(monkeypatch):
+    _entry_points(monkeypatch, broken="no_such_module_for_repro_tests:EXPERIMENTS")
+    with pytest.raises(ReproError) as info:
+        registry.load_papers()
+    msg = str(info.value)
+    assert "'broken'" in msg and "ModuleNotFoundError" in msg
+    assert "no_such_module_for_repro_tests" in msg
+
+
+def test_load_papers_rejects_wrong_object_and_key(monkeypatch, runners):
+    module = types.ModuleType("fake_repro_papers")
+    module.NOT_A_PAPER = 42
+    module.FAKE = _papers(runners)["fake"]
+    monkeypatch.setitem(sys.modules, "fake_repro_papers", module)
+    _entry_points(monkeypatch, wrong="fake_repro_papers:NOT_A_PAPER")
+    with pytest.raises(ReproError, match=r"'wrong'.*must be a .*Paper, got int"):
+        registry.load_papers()
+    _entry_points(monkeypatch, misnamed="fake_repro_papers:FAKE")
+    with pytest.raises(ReproError, match=r"key 'fake'; expected 'misnamed'"):
+        registry.load_papers()
+
+
+def _write_manifest(results: Path, exp: Experiment, **fields: Any) -> None:
+    out = results / exp.paper / exp.name
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "manifest.json").write_text(json.dumps(fields))
+
+
+def test_is_stale(tmp_path, papers):
+    exp = papers["fake"].experiments[0]
+    cfg = FakeCfg()
+    stale, reason = is_stale(exp, tmp_path, cfg)
+    assert stale and "no manifest" in reason
+
+    good_hash = registry.compute_config_hash(cfg)
+    _write_manifest(tmp_path, exp, status="crashed", config_hash=good_hash)
+    stale, reason = is_stale(exp, tmp_path, cfg)
+    assert stale and "crashed" in reason
+
+    _write_manifest(tmp_path, exp, status="completed", config_hash=good_hash)
+    assert is_stale(exp, tmp_path, cfg) == (
+        False,
+        f"fresh (completed, config hash {good_hash[:12]})",
+    )
+
+    stale, reason = is_stale(exp, tmp_path, replace(cfg, gain=0.5))
+    assert stale and "config changed" in reason
+
+    (tmp_path / "fake" / "case1" / "manifest.json").write_text("{not json")
+    stale, reason = is_stale(exp, tmp_path, cfg)
+    assert stale and "unreadable" in reason
+
+
+def test_config_hash_is_stable_and_sensitive():
+    assert registry.compute_config_hash(FakeCfg()) == registry.compute_config_hash(FakeCfg())
+    assert registry.compute_config_hash(FakeCfg()) != registry.compute_config_hash(
+        FakeCfg(gain=0.41)
+    )
+
+
+# --------------------------------------------------------------------------- cli: run
+
+
+def test_run_unknown_experiment_exits_2_listing_choices(papers, capsys):
+    assert cli.main(["run", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown experiment 'nope'" in err
+    assert "fake.case1, fake.case2, other.case1, other.case3" in err
+    assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_run_bad_override_exits_2_before_running(papers, runners, capsys, tmp_path):
+    code = cli.main(["--results", str(tmp_path), "run", "fake.case1", "--set", "gain=-1"])
+    assert code == 2
+    assert runners["fake.case1"].calls == []
+    err = capsys.readouterr().err
+    assert "gain=-1.0" in err and "[0.0, +inf)" in err
+    assert not (tmp_path / "fake").exists()
+
+
+@pytest.mark.parametrize(
+    ("override", "needle"),
+    [
+        ("gian=1", "gain, solver, video"),
+        ("solver=gurobi", "osqp, proxsuite"),
+        ("gain=fast", "expected float"),
+        ("gain", "malformed"),
+    ],
+)
+def test_run_bad_overrides_are_reported(papers, runners, capsys, override, needle):
+    assert cli.main(["run", "fake.case1", "--set", override]) == 2
+    assert needle in capsys.readouterr().err
+    assert runners["fake.case1"].calls == []
+
+
+def test_run_ambiguous_name_exits_2(papers, capsys):
+    assert cli.main(["run", "case1"]) == 2
+    assert "ambiguous" in capsys.readouterr().err
+
+
+def test_run_with_overrides_uses_hashed_dir(papers, runners, tmp_path, capsys):
+    argv = ["--results", str(tmp_path), "run", "case3", "--set", "steps=7"]
+    assert cli.main(argv) == 0
+    [(config, out_dir)] = runners["other.case3"].calls
+    assert config == NoVideoCfg(steps=7)
+    assert out_dir.parent == tmp_path / "other"
+    assert out_dir.name.startswith("case3__") and len(out_dir.name) == len("case3__") + 8
+    assert not (tmp_path / "other" / "case3").exists()  # default traces untouched
+    assert str(out_dir) in capsys.readouterr().out
+
+
+def test_run_several_overrides(papers, runners, tmp_path):
+    argv = ["run", "fake.case1", "--set", "gain=0.9", "solver=osqp", "--results", str(tmp_path)]
+    assert cli.main(argv) == 0
+    [(config, out_dir)] = runners["fake.case1"].calls
+    assert config == FakeCfg(gain=0.9, solver="osqp")
+    assert out_dir.parent == tmp_path / "fake"
+
+
+def test_run_defaults_to_paper_name_dir(papers, runners, tmp_path):
+    assert cli.main(["run", "fake.case1", "--results", str(tmp_path)]) == 0
+    [(config, out_dir)] = runners["fake.case1"].calls
+    assert config == FakeCfg()
+    assert out_dir == tmp_path / "fake" / "case1"
+    assert (out_dir / "manifest.json").is_file()
+
+
+def test_run_out_dir_option(papers, runners, tmp_path):
+    out = tmp_path / "custom"
+    assert cli.main(["run", "fake.case1", "--set", "gain=1", "--out", str(out)]) == 0
+    assert runners["fake.case1"].calls[0][1] == out
+
+
+def test_run_video(papers, runners, tmp_path, capsys):
+    assert cli.main(["--results", str(tmp_path), "run", "fake.case1", "--video"]) == 0
+    [(config, out_dir)] = runners["fake.case1"].calls
+    assert config.video is True
+    assert out_dir != tmp_path / "fake" / "case1"
+
+    assert cli.main(["--results", str(tmp_path), "run", "other.case3", "--video"]) == 2
+    assert runners["other.case3"].calls == []
+    err = capsys.readouterr().err
+    assert "--video" in err and "steps" in err
+
+
+def test_run_repro_error_exits_2_other_errors_propagate(papers, runners, tmp_path, capsys):
+    runners["fake.case1"].error = SolverError("QP infeasible at t=1.2 s")
+    assert cli.main(["--results", str(tmp_path), "run", "fake.case1"]) == 2
+    assert "QP infeasible" in capsys.readouterr().err
+    runners["fake.case1"].error = RuntimeError("bug")
+    with pytest.raises(RuntimeError, match="bug"):
+        cli.main(["--results", str(tmp_path), "run", "fake.case1"])
+
+
+def test_usage_errors_return_2(papers, capsys):
+    assert cli.main([]) == 2
+    assert cli.main(["frobnicate"]) == 2
+    assert cli.main(["--help"]) == 0
+
+
+# --------------------------------------------------------------------------- cli: list
+
+
+def test_list(papers, capsys):
+    assert cli.main(["list"]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert len(lines) == 4
+    assert lines[0].startswith("fake.case1") and "fake case1 description" in lines[0]
+    assert "second line" not in out
+    assert "(slow)" in lines[1]
+    assert "gain" not in out
+
+
+def test_list_verbose(papers, capsys):
+    assert cli.main(["list", "-v"]) == 0
+    out = capsys.readouterr().out
+    assert "gain: float = 0.4" in out
+    assert "IBVS gain [1/s]; range [0.0, +inf)" in out
+    assert "choices: proxsuite, osqp" in out
+    assert "steps: int = 10" in out
+
+
+def test_list_broken_entry_point_exits_2(monkeypatch, capsys):
+    _entry_points(monkeypatch, broken="no_such_module_for_repro_tests:EXPERIMENTS")
+    assert cli.main(["list"]) == 2
+    assert "'broken'" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- cli: results
+
+
+def test_results_runs_stale_then_nothing(papers, runners, tmp_path, capsys):
+    assert cli.main(["--results", str(tmp_path), "results"]) == 0
+    ran = {k for k, r in runners.items() if r.calls}
+    assert ran == {"fake.case1", "other.case1", "other.case3"}  # fake.case2 is slow
+    out = capsys.readouterr().out
+    assert "ran    fake.case1" in out and "skip   fake.case2" in out
+    assert runners["fake.case1"].calls[0] == (FakeCfg(), tmp_path / "fake" / "case1")
+
+    assert cli.main(["--results", str(tmp_path), "results"]) == 0
+    assert all(len(r.calls) <= 1 for r in runners.values())
+    out = capsys.readouterr().out
+    assert "fresh  fake.case1" in out and "0 ran, 3 fresh, 1 skipped" in out
+
+
+def test_results_reruns_crashed_and_changed(papers, runners, tmp_path):
+    exp = papers["other"].experiments[1]
+    _write_manifest(
+        tmp_path, exp, status="crashed", config_hash=registry.compute_config_hash(NoVideoCfg())
+    )
+    other = papers["other"].experiments[0]
+    _write_manifest(
+        tmp_path, other, status="completed", config_hash=registry.compute_config_hash(FakeCfg())
+    )
+    fake = papers["fake"].experiments[0]
+    _write_manifest(tmp_path, fake, status="completed", config_hash="old")
+    assert cli.main(["results", "--results", str(tmp_path)]) == 0
+    assert len(runners["other.case3"].calls) == 1
+    assert len(runners["fake.case1"].calls) == 1
+    assert runners["other.case1"].calls == []
+
+
+def test_results_force_slow_and_paper(papers, runners, tmp_path, capsys):
+    argv = ["--results", str(tmp_path), "results", "--paper", "fake", "--include-slow"]
+    assert cli.main(argv) == 0
+    assert cli.main([*argv, "--force"]) == 0
+    assert len(runners["fake.case1"].calls) == 2
+    assert len(runners["fake.case2"].calls) == 2
+    assert runners["other.case1"].calls == []
+
+    assert cli.main(["results", "--paper", "nope"]) == 2
+    assert "unknown paper 'nope'; valid choices: fake, other" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- cli: figures, report
+
+
+def test_figures_and_claims(monkeypatch, papers, tmp_path, capsys):
+    figure_calls: list[tuple[Path, Path]] = []
+
+    def figures(results_dir: Path, figures_dir: Path) -> list[Path]:
+        figure_calls.append((results_dir, figures_dir))
+        return [figures_dir / "fig3.png"]
+
+    papers["fake"] = replace(papers["fake"], figures=figures, claims=lambda: ["claim-a"])
+    papers["other"] = replace(papers["other"], claims=lambda: ["claim-b"])
+
+    seen: dict[str, Any] = {}
+    fake_claims = types.ModuleType("repro.runs.claims")
+
+    def evaluate_claims(claims, results_dir):
+        seen["evaluate"] = (list(claims), results_dir)
+        return "TABLE"
+
+    def write_claims_csv(df, path):
+        seen["write"] = (df, path)
+
+    fake_claims.evaluate_claims = evaluate_claims
+    fake_claims.write_claims_csv = write_claims_csv
+    monkeypatch.setitem(sys.modules, "repro.runs.claims", fake_claims)
+
+    res, fig = tmp_path / "res", tmp_path / "fig"
+    assert cli.main(["--results", str(res), "--figures", str(fig), "figures"]) == 0
+    assert figure_calls == [(res, fig)]
+    assert seen["evaluate"] == (["claim-a", "claim-b"], res)
+    assert seen["write"] == ("TABLE", res / "claims.csv")
+    out = capsys.readouterr().out
+    assert "fig3.png" in out and "other: no figures" in out
+
+    seen.clear()
+    assert cli.main(["figures", "--paper", "other", "--results", str(res)]) == 0
+    assert seen["evaluate"] == (["claim-b"], res)
+    assert len(figure_calls) == 1
+
+
+def test_report(monkeypatch, tmp_path):
+    seen: dict[str, Any] = {}
+    fake_report = types.ModuleType("repro.runs.report")
+
+    def render_report(results_dir, figures_dir, source_paths, output):
+        seen["args"] = (results_dir, figures_dir, list(source_paths), output)
+        return output
+
+    fake_report.render_report = render_report
+    monkeypatch.setitem(sys.modules, "repro.runs.report", fake_report)
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["report", "--results", "r", "--figures", "f"]) == 0
+    results_dir, figures_dir, sources, output = seen["args"]
+    assert (results_dir, figures_dir, output) == (Path("r"), Path("f"), Path("REPORT.md"))
+    assert Path(cli.__file__).resolve() in sources
+    assert all(p.suffix == ".py" for p in sources)
+
+
+def test_python_dash_m_repro_help():
+    proc = subprocess.run(
+        [sys.executable, "-m", "repro", "--help"], capture_output=True, text=True, check=False
+    )
+    assert proc.returncode == 0
+    assert "results" in proc.stdout and "figures" in proc.stdout

@@ -1,0 +1,266 @@
+"""repro.config: param metadata, validation, CLI overrides, describe."""
+
+from __future__ import annotations  # string annotations must be resolved via get_type_hints
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from repro.config import apply_overrides, config_keys, describe, param, validate
+from repro.errors import ConfigError, UnknownChoiceError
+
+
+@dataclass(frozen=True)
+class Camera:
+    fu: float = param(500.0, unit="px", range=(1.0, None), help="focal length")
+    width: int = param(640, unit="px", range=(1, 4096))
+
+
+@dataclass(frozen=True)
+class Cfg:
+    gain: float = param(0.4, unit="1/s", range=(0.0, None), help="IBVS gain lambda_4p")
+    steps: int = param(100, range=(1, None))
+    video: bool = param(False)
+    solver: str = param("proxsuite", choices=("proxsuite", "osqp"), help="QP solver")
+    label: str = param("run")
+    q0: tuple[float, ...] = param((0.0, -60.0, 0.0), unit="deg", range=(-180.0, 180.0))
+    xy: tuple[float, float] = param((1.0, 2.0), unit="m")
+    names: tuple[str, ...] = param(("a",), choices=("a", "b", "c"))
+    limit: float | None = param(None)
+    path: Path = param(Path("x"))
+    camera: Camera = param(Camera())
+
+
+# --------------------------------------------------------------------------- param
+
+
+def test_param_stores_metadata_and_tuple_default_factory():
+    fields = {f.name: f for f in dataclasses.fields(Cfg)}
+    gain = fields["gain"]
+    assert gain.default == 0.4
+    assert gain.metadata["unit"] == "1/s"
+    assert gain.metadata["range"] == (0.0, None)
+    assert gain.metadata["help"] == "IBVS gain lambda_4p"
+    assert fields["solver"].metadata["choices"] == ("proxsuite", "osqp")
+    assert fields["q0"].default is dataclasses.MISSING
+    assert fields["q0"].default_factory() == (0.0, -60.0, 0.0)
+
+
+def test_param_list_default_is_not_shared():
+    @dataclass(frozen=True)
+    class WithList:
+        xs: list = param([1, 2])
+
+    a, b = WithList(), WithList()
+    assert a.xs == [1, 2]
+    assert a.xs is not b.xs
+
+
+def test_param_rejects_default_outside_its_own_range_or_choices():
+    with pytest.raises(ConfigError, match=r"\[0.0, \+inf\)"):
+        param(-1.0, range=(0.0, None))
+    with pytest.raises(UnknownChoiceError, match="osqp, proxsuite"):
+        param("gurobi", choices=("proxsuite", "osqp"))
+    with pytest.raises(ConfigError, match="low > high"):
+        param(1.0, range=(2.0, 1.0))
+
+
+# --------------------------------------------------------------------------- validate
+
+
+def test_validate_accepts_defaults():
+    validate(Cfg())
+
+
+def test_validate_reports_field_value_and_range():
+    with pytest.raises(ConfigError) as info:
+        validate(Cfg(gain=-0.5))
+    msg = str(info.value)
+    assert "gain" in msg and "-0.5" in msg and "[0.0, +inf)" in msg
+
+
+def test_validate_nested_and_tuple_elements():
+    with pytest.raises(ConfigError, match=r"camera\.fu.*\[1\.0, \+inf\)"):
+        validate(Cfg(camera=Camera(fu=0.0)))
+    with pytest.raises(ConfigError, match=r"q0\[1\]=-200\.0.*\[-180\.0, 180\.0\]"):
+        validate(Cfg(q0=(0.0, -200.0)))
+
+
+def test_validate_choices_lists_valid_ones():
+    with pytest.raises(UnknownChoiceError) as info:
+        validate(Cfg(solver="gurobi"))
+    assert "'gurobi'" in str(info.value)
+    assert "osqp, proxsuite" in str(info.value)
+    assert info.value.choices == ["osqp", "proxsuite"]
+
+
+def test_validate_requires_a_dataclass_instance():
+    with pytest.raises(ConfigError, match="dataclass"):
+        validate(Cfg)
+
+
+# --------------------------------------------------------------------------- overrides
+
+
+@pytest.mark.parametrize(
+    ("item", "field", "expected"),
+    [
+        ("gain=0.75", "gain", 0.75),
+        ("gain=1e-2", "gain", 0.01),
+        ("gain=3", "gain", 3.0),
+        ("steps=250", "steps", 250),
+        ("video=true", "video", True),
+        ("video=YES", "video", True),
+        ("video=1", "video", True),
+        ("video=false", "video", False),
+        ("video=no", "video", False),
+        ("video=0", "video", False),
+        ("solver=osqp", "solver", "osqp"),
+        ("label=hello world", "label", "hello world"),
+        ("label=a=b", "label", "a=b"),
+        ("q0=0,-60,0", "q0", (0.0, -60.0, 0.0)),
+        ("q0=10, 20.5", "q0", (10.0, 20.5)),
+        ("q0=(1,2,3)", "q0", (1.0, 2.0, 3.0)),
+        ("q0=", "q0", ()),
+        ("xy=3,4", "xy", (3.0, 4.0)),
+        ("names=b,c", "names", ("b", "c")),
+        ("limit=2.5", "limit", 2.5),
+        ("limit=none", "limit", None),
+        ("path=out/dir", "path", Path("out/dir")),
+    ],
+)
+def test_override_parses_every_supported_type(item, field, expected):
+    cfg = apply_overrides(Cfg(), [item])
+    value = getattr(cfg, field)
+    assert value == expected
+    assert type(value) is type(expected)
+
+
+def test_override_returns_a_copy_and_applies_in_order():
+    base = Cfg()
+    cfg = apply_overrides(base, ["gain=1", "steps=5", "gain=2"])
+    assert (cfg.gain, cfg.steps) == (2.0, 5)
+    assert base.gain == 0.4  # untouched
+    assert apply_overrides(base, []) == base
+
+
+def test_override_nested_key():
+    cfg = apply_overrides(Cfg(), ["camera.fu=600", "camera.width=800"])
+    assert cfg.camera == Camera(fu=600.0, width=800)
+    assert isinstance(cfg.camera.fu, float)
+    assert Cfg().camera.fu == 500.0
+
+
+def test_override_malformed():
+    with pytest.raises(ConfigError, match=r"malformed override 'gain'.*key=value"):
+        apply_overrides(Cfg(), ["gain"])
+    with pytest.raises(ConfigError, match="malformed"):
+        apply_overrides(Cfg(), ["=3"])
+
+
+def test_override_unknown_key_lists_valid_keys():
+    with pytest.raises(UnknownChoiceError) as info:
+        apply_overrides(Cfg(), ["gian=1"])
+    msg = str(info.value)
+    assert "'gian'" in msg
+    for key in ("gain", "steps", "camera.fu", "camera.width"):
+        assert key in msg
+
+
+def test_override_unknown_nested_key():
+    with pytest.raises(UnknownChoiceError, match=r"camera\.fv.*camera\.fu"):
+        apply_overrides(Cfg(), ["camera.fv=1"])
+    with pytest.raises(UnknownChoiceError, match=r"gain\.x"):
+        apply_overrides(Cfg(), ["gain.x=1"])
+
+
+def test_override_whole_nested_config_is_refused():
+    with pytest.raises(ConfigError, match=r"nested config.*camera\.fu"):
+        apply_overrides(Cfg(), ["camera=1"])
+
+
+@pytest.mark.parametrize(
+    ("item", "expected_type"),
+    [
+        ("gain=fast", "float"),
+        ("gain=nan", "float"),
+        ("steps=2.5", "int"),
+        ("q0=0,x,0", r"tuple\[float, \.\.\.\]"),
+        ("limit=abc", r"float \| None"),
+    ],
+)
+def test_override_bad_value_names_expected_type(item, expected_type):
+    key, _, text = item.partition("=")
+    with pytest.raises(ConfigError, match=rf"{key}.*{text!r}.*expected {expected_type}"):
+        apply_overrides(Cfg(), [item])
+
+
+def test_override_bad_bool_lists_spellings():
+    with pytest.raises(ConfigError, match=r"expected bool.*true.*yes.*false.*no"):
+        apply_overrides(Cfg(), ["video=maybe"])
+
+
+def test_override_fixed_length_tuple():
+    with pytest.raises(ConfigError, match=r"xy.*2 comma-separated values, got 3"):
+        apply_overrides(Cfg(), ["xy=1,2,3"])
+
+
+def test_override_out_of_range_names_range():
+    with pytest.raises(ConfigError) as info:
+        apply_overrides(Cfg(), ["gain=-1"])
+    msg = str(info.value)
+    assert "gain=-1.0" in msg and "[0.0, +inf)" in msg
+    with pytest.raises(ConfigError, match=r"camera\.width=0.*\[1, 4096\]"):
+        apply_overrides(Cfg(), ["camera.width=0"])
+    with pytest.raises(ConfigError, match=r"q0\[0\]=999\.0"):
+        apply_overrides(Cfg(), ["q0=999"])
+
+
+def test_override_bad_choice_lists_choices():
+    with pytest.raises(UnknownChoiceError) as info:
+        apply_overrides(Cfg(), ["solver=gurobi"])
+    assert "'gurobi'" in str(info.value) and "osqp, proxsuite" in str(info.value)
+    with pytest.raises(UnknownChoiceError, match="a, b, c"):
+        apply_overrides(Cfg(), ["names=a,z"])
+
+
+def test_override_in_locally_defined_config_infers_types():
+    # get_type_hints cannot resolve annotations of a class local to a function;
+    # the parser falls back on the type of the current value.
+    @dataclass(frozen=True)
+    class Local:
+        k: float = param(1.0, range=(0.0, 10.0))
+        n: int = 3
+        ts: tuple[float, ...] = (1.0,)
+
+    cfg = apply_overrides(Local(), ["k=2", "n=4", "ts=1,2"])
+    assert (cfg.k, cfg.n, cfg.ts) == (2.0, 4, (1.0, 2.0))
+    with pytest.raises(ConfigError, match=r"\[0.0, 10.0\]"):
+        apply_overrides(Local(), ["k=11"])
+
+
+# --------------------------------------------------------------------------- describe
+
+
+def test_describe_rows():
+    rows = {row[0]: row for row in describe(Cfg)}
+    assert rows["gain"] == ("gain", "float", "0.4", "IBVS gain lambda_4p [1/s]; range [0.0, +inf)")
+    assert rows["q0"][1] == "tuple[float, ...]"
+    assert rows["q0"][2] == "(0.0, -60.0, 0.0)"
+    assert rows["solver"][3] == "QP solver; choices: proxsuite, osqp"
+    assert rows["limit"][1] == "float | None"
+    assert rows["camera.fu"] == (
+        "camera.fu",
+        "float",
+        "500.0",
+        "focal length [px]; range [1.0, +inf)",
+    )
+    assert "camera" not in rows
+    assert config_keys(Cfg) == [row[0] for row in describe(Cfg())]
+
+
+def test_describe_rejects_non_dataclass():
+    with pytest.raises(ConfigError, match="not a dataclass"):
+        describe(int)

@@ -1,0 +1,436 @@
+"""Tests of repro.control.qp: known solutions, CBF-like random QPs, infeasibility, warm start."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from repro.control.qp import (
+    SOLVERS,
+    QPDimensionError,
+    QPProblem,
+    QPSolution,
+    QPSolver,
+    _RawResult,
+    kkt_residuals,
+    lower_multipliers,
+)
+from repro.errors import ConfigError, UnknownChoiceError
+
+quadprog = pytest.importorskip("quadprog")
+
+# Franka Emika Panda joint velocity limits [rad/s] (official datasheet).
+V_MAX = np.array([2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26])
+N_JOINTS, N_SENSORS = 7, 36
+
+
+def _assert_kkt_small(problem: QPProblem, sol: QPSolution, tol: float = 1e-6) -> None:
+    res = kkt_residuals(problem, sol)
+    assert set(res) == {"stationarity", "primal_infeasibility", "complementarity", "dual_sign"}
+    assert all(v >= 0.0 for v in res.values()), res
+    assert max(res.values()) < tol, res
+
+
+# --------------------------------------------------------------------------------------
+# 1. Known solutions
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("with_rows", [False, True])
+def test_unconstrained(solver: str, with_rows: bool) -> None:
+    H = np.array([[4.0, 1.0], [1.0, 2.0]])
+    g = np.array([1.0, -1.0])
+    x_star = -np.linalg.solve(H, g)  # = [-3/7, 5/7]
+    if with_rows:  # an inactive row and an infinite box: still the unconstrained optimum
+        problem = QPProblem(
+            H, g, np.array([[1.0, 1.0]]), np.array([-10.0]), np.array([np.inf]),
+            np.full(2, -np.inf), np.full(2, np.inf),
+        )  # fmt: skip
+        m = 1
+    else:
+        problem = QPProblem(H, g, None, None, None, None, None)
+        m = 0
+    sol = QPSolver(2, m, solver).solve(problem)
+    assert sol.status == "solved"
+    np.testing.assert_allclose(sol.x, x_star, atol=1e-8)
+    np.testing.assert_allclose(sol.x, [-3.0 / 7.0, 5.0 / 7.0], atol=1e-8)
+    assert sol.z.shape == (m,) and sol.z_box.shape == (2,)
+    np.testing.assert_allclose(sol.z, 0.0, atol=1e-8)
+    np.testing.assert_allclose(sol.z_box, 0.0, atol=1e-8)
+    _assert_kkt_small(problem, sol, 1e-7)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_single_active_lower_row(solver: str) -> None:
+    """min 1/2 |x|^2 s.t. a^T x >= b, b > 0: x = b a / |a|^2, kappa = b / |a|^2."""
+    a, b = np.array([1.0, 2.0]), 5.0
+    problem = QPProblem(np.eye(2), np.zeros(2), a[None, :], np.array([b]), np.array([np.inf]),
+                        None, None)  # fmt: skip
+    sol = QPSolver(2, 1, solver).solve(problem)
+    assert sol.status == "solved"
+    np.testing.assert_allclose(sol.x, [1.0, 2.0], atol=1e-8)
+    # Lower bound active -> z < 0 (proxsuite convention); paper's kappa = -z = 1.
+    np.testing.assert_allclose(sol.z, [-1.0], atol=1e-8)
+    np.testing.assert_allclose(lower_multipliers(sol), [1.0], atol=1e-8)
+    np.testing.assert_allclose(sol.z_box, 0.0, atol=1e-8)
+    _assert_kkt_small(problem, sol, 1e-7)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_single_active_upper_row(solver: str) -> None:
+    """min 1/2 |x|^2 s.t. a^T x <= -5: x = -[1, 2], upper bound active -> z = +1, kappa = 0."""
+    a = np.array([1.0, 2.0])
+    problem = QPProblem(np.eye(2), np.zeros(2), a[None, :], np.array([-np.inf]),
+                        np.array([-5.0]), None, None)  # fmt: skip
+    sol = QPSolver(2, 1, solver).solve(problem)
+    assert sol.status == "solved"
+    np.testing.assert_allclose(sol.x, [-1.0, -2.0], atol=1e-8)
+    np.testing.assert_allclose(sol.z, [1.0], atol=1e-8)
+    np.testing.assert_allclose(lower_multipliers(sol), [0.0], atol=1e-12)
+    _assert_kkt_small(problem, sol, 1e-7)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_active_box_bounds(solver: str) -> None:
+    """H = diag(2, 1), g = (-6, 2): free optimum (3, -2), box [-1, 1]^2 -> x = (1, -1).
+
+    Stationarity: 2*1 - 6 + zb_1 = 0 -> zb_1 = +4 (upper active); 1*(-1) + 2 + zb_2 = 0 ->
+    zb_2 = -1 (lower active).
+    """
+    problem = QPProblem(np.diag([2.0, 1.0]), np.array([-6.0, 2.0]), None, None, None,
+                        np.array([-1.0, -1.0]), np.array([1.0, 1.0]))  # fmt: skip
+    sol = QPSolver(2, 0, solver).solve(problem)
+    assert sol.status == "solved"
+    np.testing.assert_allclose(sol.x, [1.0, -1.0], atol=1e-8)
+    np.testing.assert_allclose(sol.z_box, [4.0, -1.0], atol=1e-8)
+    assert sol.z.shape == (0,)
+    _assert_kkt_small(problem, sol, 1e-7)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_row_and_box_duals_are_split(solver: str) -> None:
+    """One active row and one active box bound at once: duals land in z and z_box.
+
+    min 1/2 |x|^2 - 3 x_2 s.t. x_1 + x_2 >= 4, x_2 <= 2: x = (2, 2), z = -2, zb = (0, +3).
+    (Stationarity: x_1 - kappa = 0 -> kappa = 2; x_2 - 3 - kappa + zb_2 = 0 -> zb_2 = 3.)
+    """
+    problem = QPProblem(np.eye(2), np.array([0.0, -3.0]), np.array([[1.0, 1.0]]),
+                        np.array([4.0]), np.array([np.inf]), np.array([-10.0, -10.0]),
+                        np.array([10.0, 2.0]))  # fmt: skip
+    sol = QPSolver(2, 1, solver).solve(problem)
+    assert sol.status == "solved"
+    np.testing.assert_allclose(sol.x, [2.0, 2.0], atol=1e-8)
+    np.testing.assert_allclose(sol.z, [-2.0], atol=1e-8)
+    np.testing.assert_allclose(sol.z_box, [0.0, 3.0], atol=1e-8)
+    np.testing.assert_allclose(lower_multipliers(sol), [2.0], atol=1e-8)
+    _assert_kkt_small(problem, sol, 1e-7)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_infinite_and_large_finite_bounds_agree(solver: str) -> None:
+    """+-inf bounds are accepted as such and give the same answer as +-1e20."""
+    base = QPProblem(np.eye(2), np.zeros(2), np.array([[1.0, 2.0]]), np.array([5.0]),
+                     np.array([np.inf]), np.full(2, -np.inf), np.full(2, np.inf))  # fmt: skip
+    big = base._replace(u=np.array([1e20]), lb=np.full(2, -1e20), ub=np.full(2, 1e20))
+    s_inf = QPSolver(2, 1, solver).solve(base)
+    s_big = QPSolver(2, 1, solver).solve(big)
+    assert s_inf.status == s_big.status == "solved"
+    np.testing.assert_allclose(s_inf.x, [1.0, 2.0], atol=1e-8)
+    np.testing.assert_allclose(s_big.x, s_inf.x, atol=1e-8)
+    np.testing.assert_allclose(s_big.z, s_inf.z, atol=1e-8)
+
+
+def test_osqp_and_proxsuite_raw_duals_have_the_same_sign() -> None:
+    """The backends themselves (not this module) share the sign convention.
+
+    Row 1 lower-active, row 2 upper-active, box upper-active on x_2.
+    """
+    import osqp
+    import proxsuite
+    import scipy.sparse as sp
+
+    H = np.diag([1.0, 2.0, 3.0])
+    g = np.array([1.0, -1.0, 0.5])
+    C = np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    l, u = np.array([1.0, -1e20]), np.array([1e20, -1.0])
+    lb, ub = np.full(3, -10.0), np.array([10.0, 0.2, 10.0])
+
+    qp = proxsuite.proxqp.dense.QP(3, 0, 2, True)
+    qp.settings.eps_abs = 1e-10
+    qp.init(H, g, None, None, C, l, u, lb, ub)
+    qp.solve()
+    z_prox = np.asarray(qp.results.z)
+    assert z_prox.shape == (5,)  # m row duals then n box duals
+
+    solver = osqp.OSQP()
+    A = sp.csc_matrix(np.vstack([C, np.eye(3)]))
+    solver.setup(sp.csc_matrix(np.triu(H)), g, A, np.r_[l, lb], np.r_[u, ub], eps_abs=1e-10,
+                 eps_rel=0.0, polishing=True, verbose=False)  # fmt: skip
+    y_osqp = np.asarray(solver.solve(raise_error=False).y)
+
+    np.testing.assert_allclose(qp.results.x, [0.8, 0.2, -1.0], atol=1e-7)
+    np.testing.assert_allclose(z_prox, [-1.8, 2.5, 0.0, 2.4, 0.0], atol=1e-6)
+    np.testing.assert_allclose(y_osqp, z_prox, atol=1e-6)
+    for y in (z_prox, y_osqp):  # H x + g + [C; I]^T y = 0
+        np.testing.assert_allclose(H @ qp.results.x + g + np.vstack([C, np.eye(3)]).T @ y, 0.0,
+                                   atol=1e-6)  # fmt: skip
+
+
+# --------------------------------------------------------------------------------------
+# 2. Random CBF-like QPs of the paper's size, warm-started in sequence
+# --------------------------------------------------------------------------------------
+
+
+def _cbf_sequence(seed: int, count: int = 200, step: float = 0.02) -> list[QPProblem]:
+    """``count`` CBF-like QPs (n = 7, m = 36), each a small perturbation of the previous.
+
+    H = J^T J + 0.01 I, g = 0.4 J^T e, rows a_k^T x >= b_k with b = A x0 - slack for a
+    feasible x0 strictly inside the Panda's velocity box, slack > 0.
+    """
+    rng = np.random.default_rng(seed)
+    J = rng.standard_normal((8, N_JOINTS))
+    e = rng.standard_normal(8)
+    A = rng.standard_normal((N_SENSORS, N_JOINTS))
+    x0 = rng.uniform(-0.5, 0.5, N_JOINTS) * V_MAX
+    slack = rng.exponential(1.0, N_SENSORS) + 1e-3
+    problems = []
+    for _ in range(count):
+        problems.append(
+            QPProblem(
+                H=J.T @ J + 0.01 * np.eye(N_JOINTS),
+                g=0.4 * J.T @ e,
+                C=A.copy(),
+                l=A @ x0 - slack,
+                u=np.full(N_SENSORS, np.inf),
+                lb=-V_MAX,
+                ub=V_MAX.copy(),
+            )
+        )
+        J = J + step * rng.standard_normal(J.shape)
+        e = e + step * rng.standard_normal(e.shape)
+        A = A + step * rng.standard_normal(A.shape)
+        x0 = np.clip(x0 + step * rng.standard_normal(N_JOINTS), -0.9 * V_MAX, 0.9 * V_MAX)
+        slack = np.abs(slack + step * rng.standard_normal(N_SENSORS)) + 1e-3
+    return problems
+
+
+def _quadprog_reference(p: QPProblem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact active-set solution (x, z, z_box) in this module's sign convention."""
+    n, m = p.H.shape[0], p.C.shape[0]
+    # quadprog: min 1/2 x'Gx - a'x s.t. Cq' x >= bq, multipliers lam >= 0.
+    Cq = np.vstack([p.C, np.eye(n), -np.eye(n)]).T
+    bq = np.concatenate([p.l, p.lb, -p.ub])
+    x, _, _, _, lam, _ = quadprog.solve_qp(p.H, -p.g, Cq, bq, 0)
+    z = -lam[:m]
+    z_box = lam[m + n :] - lam[m : m + n]
+    return x, z, z_box
+
+
+@pytest.fixture(scope="module")
+def cbf_problems() -> list[tuple[QPProblem, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    problems = _cbf_sequence(seed=20240917)
+    return [(p, _quadprog_reference(p)) for p in problems]
+
+
+@pytest.mark.parametrize(
+    ("solver", "max_iter"),
+    # OSQP's ADMM needs > 1000 iterations on ~1% of these strongly constrained problems
+    # (they come back as "max_iter" with the default budget, see the next test).
+    [("proxsuite", 1000), ("osqp", 10000)],
+)
+def test_random_cbf_qps_match_active_set_solver(solver: str, max_iter: int, cbf_problems) -> None:
+    qp = QPSolver(N_JOINTS, N_SENSORS, solver, max_iter=max_iter)
+    n_active = []
+    for p, (x_ref, z_ref, zb_ref) in cbf_problems:
+        sol = qp.solve(p)
+        assert sol.status == "solved"
+        np.testing.assert_allclose(sol.x, x_ref, atol=1e-6, rtol=0)
+        _assert_kkt_small(p, sol, 1e-6)
+        # Multipliers agree with quadprog's (unique here: < 7 active rows, generic data).
+        kappa = lower_multipliers(sol)
+        np.testing.assert_allclose(kappa, -z_ref, atol=1e-5 * (1 + np.abs(z_ref).max()))
+        np.testing.assert_allclose(sol.z_box, zb_ref, atol=1e-5 * (1 + np.abs(zb_ref).max()))
+        assert np.all(kappa >= 0.0)
+        assert sol.primal_residual < 1e-6 and sol.dual_residual < 1e-6
+        n_active.append(int(np.sum(kappa > 1e-8)))
+    # The sequence exercises the constraints: rows are active in most problems.
+    assert np.mean(n_active) > 1.0
+
+
+def test_random_cbf_qps_osqp_default_budget_never_wrong(cbf_problems) -> None:
+    """With the default 1000 iterations OSQP may run out, but "solved" is always right."""
+    qp = QPSolver(N_JOINTS, N_SENSORS, "osqp")
+    statuses = []
+    for p, (x_ref, _, _) in cbf_problems:
+        sol = qp.solve(p)
+        statuses.append(sol.status)
+        assert sol.status in ("solved", "max_iter")
+        assert sol.iterations <= 1000
+        if sol.status == "solved":
+            np.testing.assert_allclose(sol.x, x_ref, atol=1e-6, rtol=0)
+    assert statuses.count("solved") >= 0.95 * len(statuses)
+
+
+def test_wrong_backend_success_is_downgraded_to_failed() -> None:
+    """A backend that says "solved" with a wrong-sign multiplier is not believed."""
+    problem = QPProblem(np.eye(2), np.zeros(2), np.array([[1.0, 2.0]]), np.array([5.0]),
+                        np.array([np.inf]), None, None)  # fmt: skip
+    qp = QPSolver(2, 1, "proxsuite")
+
+    class _Liar:
+        is_warm = True
+        calls = 0
+
+        def solve(self, d):
+            _Liar.calls += 1
+            # Feasible, active x = (1, 2), but z = +1 on a row with u = +inf (wrong sign).
+            return _RawResult(np.array([1.0, 2.0]), np.array([1.0]), np.zeros(2), "solved", 3)
+
+        def reset(self):
+            self.is_warm = False
+
+    qp._backend = _Liar()  # type: ignore[assignment]
+    sol = qp.solve(problem)
+    res = kkt_residuals(problem, sol)
+    assert res["dual_sign"] == pytest.approx(1.0)
+    assert res["stationarity"] == pytest.approx(4.0)  # x + a z = (2, 4)
+    assert res["primal_infeasibility"] == 0.0
+    assert sol.status == "failed"
+    assert _Liar.calls == 2  # warm attempt, then one cold retry
+    assert sol.iterations == 6
+
+
+def test_kkt_residuals_detect_each_violation() -> None:
+    """At the exact optimum all four residuals vanish; each perturbation shows up."""
+    problem = QPProblem(np.eye(2), np.zeros(2), np.array([[1.0, 2.0]]), np.array([5.0]),
+                        np.array([np.inf]), np.full(2, -10.0), np.full(2, 10.0))  # fmt: skip
+    exact = QPSolution(np.array([1.0, 2.0]), np.array([-1.0]), np.zeros(2), "solved", 0, 0.0,
+                       0.0, 0.0)  # fmt: skip
+    assert max(kkt_residuals(problem, exact).values()) < 1e-14
+    infeasible = exact._replace(x=np.array([0.5, 1.0]))  # a'x = 2.5 < 5
+    res = kkt_residuals(problem, infeasible)
+    assert res["stationarity"] == pytest.approx(1.0)  # x + a z = (-0.5, -1)
+    assert res["primal_infeasibility"] == pytest.approx(2.5)
+    assert res["complementarity"] == pytest.approx(2.5)  # kappa = 1 times gap |2.5 - 5|
+    wrong_sign = exact._replace(z=np.array([1.0]))
+    assert kkt_residuals(problem, wrong_sign)["dual_sign"] == pytest.approx(1.0)
+    box_gap = exact._replace(z_box=np.array([0.0, 1e-3]))  # upper box dual, box inactive
+    assert kkt_residuals(problem, box_gap)["complementarity"] == pytest.approx(8e-3)
+
+
+# --------------------------------------------------------------------------------------
+# 3. Infeasible problems
+# --------------------------------------------------------------------------------------
+
+
+def _infeasible_cbf() -> QPProblem:
+    """Two opposite proximity sensors both under threshold: a'x >= b and -a'x >= b, b > 0."""
+    p = _cbf_sequence(seed=7, count=1)[0]
+    C, l = p.C.copy(), p.l.copy()
+    C[1] = -C[0]
+    l[0] = l[1] = 0.3
+    return p._replace(C=C, l=l)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_infeasible_is_reported_not_raised(solver: str) -> None:
+    feasible = _cbf_sequence(seed=7, count=1)[0]
+    infeasible = _infeasible_cbf()
+    qp = QPSolver(N_JOINTS, N_SENSORS, solver)
+    assert qp.solve(feasible).status == "solved"  # so the infeasible one is warm-started
+    t0 = time.perf_counter()
+    sol = qp.solve(infeasible)
+    elapsed = time.perf_counter() - t0
+    assert sol.status in ("infeasible", "max_iter")
+    assert elapsed < 1.0
+    if solver == "osqp":  # proxsuite's max_iter bounds outer iterations, not sol.iterations
+        assert sol.iterations <= 1000
+    assert np.all(np.isfinite(sol.x)) and np.all(np.isfinite(sol.z))
+    assert np.all(np.isfinite(sol.z_box))
+    # The controller carries on: the next feasible problem is solved again.
+    after = qp.solve(feasible)
+    assert after.status == "solved"
+    np.testing.assert_allclose(after.x, _quadprog_reference(feasible)[0], atol=1e-6)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_max_iter_bounds_the_work_on_infeasible_problems(solver: str) -> None:
+    infeasible = _infeasible_cbf()
+    work = {}
+    for max_iter in (20, 1000):
+        sol = QPSolver(N_JOINTS, N_SENSORS, solver, max_iter=max_iter).solve(infeasible)
+        assert sol.status in ("infeasible", "max_iter")
+        work[max_iter] = sol.iterations
+    assert work[20] <= work[1000]
+    if solver == "proxsuite":  # never certifies infeasibility here: it runs out of budget
+        assert work[20] < work[1000]
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_crossed_bounds_and_nan_data_do_not_raise(solver: str) -> None:
+    base = QPProblem(np.eye(2), np.zeros(2), np.array([[1.0, 0.0]]), np.array([1.0]),
+                     np.array([0.0]), None, None)  # fmt: skip
+    qp = QPSolver(2, 1, solver)
+    assert qp.solve(base).status == "infeasible"  # l > u
+    nan = base._replace(g=np.array([np.nan, 0.0]), u=np.array([np.inf]))
+    sol = qp.solve(nan)
+    assert sol.status == "failed"
+    assert np.all(np.isfinite(sol.x))
+
+
+# --------------------------------------------------------------------------------------
+# 4. Bad configuration
+# --------------------------------------------------------------------------------------
+
+
+def test_unknown_solver_name_lists_valid_ones() -> None:
+    with pytest.raises(UnknownChoiceError) as info:
+        QPSolver(7, 36, solver="gurobi")
+    err = info.value
+    assert isinstance(err, ConfigError)
+    assert err.kind == "QP solver" and err.value == "gurobi"
+    assert err.choices == sorted(SOLVERS)
+    for name in SOLVERS:
+        assert name in str(err)
+
+
+def test_wrong_shapes_raise() -> None:
+    qp = QPSolver(2, 1, "proxsuite")
+    with pytest.raises(QPDimensionError):
+        qp.solve(QPProblem(np.eye(3), np.zeros(3), None, None, None, None, None))
+    with pytest.raises(QPDimensionError):
+        qp.solve(QPProblem(np.eye(2), np.zeros(2), np.ones((2, 2)), None, None, None, None))
+
+
+# --------------------------------------------------------------------------------------
+# 5. Warm start and reset
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_warm_start_and_reset(solver: str) -> None:
+    problem = _cbf_sequence(seed=3, count=1)[0]
+    qp = QPSolver(N_JOINTS, N_SENSORS, solver)
+    first = qp.solve(problem)
+    second = qp.solve(problem)
+    assert first.status == second.status == "solved"
+    assert second.iterations <= first.iterations
+    assert first.iterations > 0
+    np.testing.assert_allclose(second.x, first.x, atol=1e-7)
+    qp.reset()
+    again = qp.solve(problem)  # cold again: same work as the very first solve
+    assert again.status == "solved"
+    assert again.iterations == first.iterations
+    np.testing.assert_allclose(again.x, first.x, atol=1e-9)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_no_warm_start_repeats_the_cold_solve(solver: str) -> None:
+    problem = _cbf_sequence(seed=3, count=1)[0]
+    qp = QPSolver(N_JOINTS, N_SENSORS, solver, warm_start=False)
+    first, second = qp.solve(problem), qp.solve(problem)
+    assert first.status == second.status == "solved"
+    assert second.iterations == first.iterations
