@@ -36,6 +36,8 @@ EXPERIMENTS = Paper(
                    "ring 2 (Sec. VI says it oscillates)", _c.Case2CoarseConfig, run),
         Experiment("parallel", "thomas2024", "Sec. VI eq. (20): goal between two parallel planes",
                    _c.ParallelConfig, run),
+        Experiment("parallel_noisy", "thomas2024", "The parallel-planes run with 2 mm ToF noise",
+                   _c.ParallelNoisyConfig, run),
     ),
     figures=_figures,
     claims=_claims,

@@ -17,20 +17,19 @@ import pybullet as p
 from experiments.thomas2024 import scene as sc
 from experiments.thomas2024.config import Thomas2024Config
 from repro.control.cbf_qp import (
+    CBFQPController,
     Inequalities,
     cbf_inequalities,
     ibvs_objective,
-    solve_cbf_qp,
 )
 from repro.control.proximity_features import NormalEstimator, ring_interaction_matrix
-from repro.control.qp import QPSolver
 from repro.errors import ConfigError
 from repro.geometry import inv_T
 from repro.runs.trace import TraceRecorder
 from repro.sensors.camera import Camera, move_dot_target, spawn_dot_target
 from repro.sensors.proximity import ProximityRing, exclude_from_rays
 from repro.sim.panda import PANDA_JOINTS, PANDA_LIMITS
-from repro.sim.robot import Robot
+from repro.sim.robot import Robot, solve_ik
 from repro.sim.world import World, WorldConfig, pose_to_pb
 from repro.vision.features import interaction_matrix_points, twist_transform
 
@@ -83,6 +82,8 @@ def build(config: Thomas2024Config, out_dir: Path) -> Setup:
     planes = scene.planes
     if config.case == "parallel":
         planes = sc.parallel_planes(robot.frame_pose("ring2", q_goal), config.thresholds[1])
+    elif config.case == "case2":
+        planes = sc.case2_planes(robot.frame_pose("ring2", q_goal), config.thresholds[1])
 
     ss = np.random.SeedSequence(config.seed)
     rngs = [np.random.default_rng(s) for s in ss.spawn(2)]
@@ -122,6 +123,11 @@ def build(config: Thomas2024Config, out_dir: Path) -> Setup:
     s_star = sc.INTRINSICS.to_normalized(uv_star)
 
     q0 = np.deg2rad(config.q0_deg)
+    if config.case == "parallel":
+        # Start with ring 2 backed away from the goal along its axis, so that it moves
+        # between the boards towards a goal at the threshold distance from both.
+        T_start = robot.frame_pose("ring2", q_goal) @ sc.trans(0.0, 0.0, -sc.PARALLEL_RETREAT)
+        q0 = solve_ik(robot, "ring2", T_start, q_goal)
     robot.reset(q0)
     setup = Setup(world, robot, render, rings, estimators, camera, scene, planes, obstacle_ids,
                   render_ids, target_ids, T_world_target, s_star, Z_star, q_goal)
@@ -238,7 +244,7 @@ def _loop(setup: Setup, config: Thomas2024Config, rec: TraceRecorder,
     n = robot.n
     qd_max = np.asarray(PANDA_LIMITS.qd_max)
     m = sum(r.spec.n_sensors for r in setup.rings) if config.proximity else 0
-    solver = QPSolver(n, m, solver=config.qp_solver)
+    controller = CBFQPController(n, m, solver=config.qp_solver, max_iter=config.qp_max_iter)
     dt = world.config.control_dt
     n_steps = int(round(config.duration / dt))
     frames: list[np.ndarray] = []
@@ -248,6 +254,7 @@ def _loop(setup: Setup, config: Thomas2024Config, rec: TraceRecorder,
     stop_reason = ""
     t_ctrl_total = 0.0
     lost_before = False
+    prev_status = "solved"
     for step in range(n_steps + 1):
         t = step * dt
         q, qd = robot.q(), robot.qd()
@@ -297,6 +304,7 @@ def _loop(setup: Setup, config: Thomas2024Config, rec: TraceRecorder,
                 b_rows.append(ineq.b)
         # --- CBF-QP (10)
         status = "no_features"
+        max_slack = 0.0
         u = np.zeros(n)
         grad_L0 = float("nan")
         kappa = np.zeros(m)
@@ -308,11 +316,15 @@ def _loop(setup: Setup, config: Thomas2024Config, rec: TraceRecorder,
             obj = ibvs_objective(J_4p, e_4p, config.lambda_4p, config.mu)
             ineq = Inequalities(np.vstack(A_rows), np.concatenate(b_rows)) if m else \
                 Inequalities(np.zeros((0, n)), np.zeros(0))
-            res = solve_cbf_qp(solver, obj, ineq, qd_max)
+            res = controller.step(obj, ineq, qd_max)
             status, u, kappa, grad_L0 = res.status, res.u, res.kappa, res.grad_L0
             iters, solve_s = res.solution.iterations, res.solution.solve_time_s
-            if status != "solved":
-                rec.event(t, step, "qp_" + status, "fallback u = 0")
+            max_slack = float(np.max(res.slack)) if m else 0.0
+            if status != prev_status and status != "solved":
+                rec.event(t, step, "qp_" + status,
+                          f"hard QP {res.qp_status}; " + ("slack-relaxed CBFs, max slack "
+                          f"{max_slack:.3g} m/s" if status == "relaxed" else "fallback u = 0"))
+            prev_status = status
         t_ctrl = time.perf_counter() - tic2
         t_ctrl_total += t_ctrl
         e_norm = float(np.linalg.norm(e_4p)) if all_found else float("nan")
@@ -339,6 +351,7 @@ def _loop(setup: Setup, config: Thomas2024Config, rec: TraceRecorder,
                 row[f"r{k + 1}_kappa{i + 1}"] = kap[off + i]
         row["qp_status"] = status
         row["qp_iter"] = iters
+        row["qp_max_slack"] = max_slack
         row["qp_solve_s"] = solve_s
         row["grad_L0"] = grad_L0
         row["ctrl_s"] = t_ctrl

@@ -96,7 +96,7 @@ class HandPath:
 
     size: tuple[float, float, float] = (0.09, 0.18, 0.03)  # ours: an adult palm, 9 x 18 x 3 cm
     approaches: tuple[tuple[str, float, float, float], ...] = ()  # (ring, start [s], duration [s], azimuth [rad])
-    far: float = 0.40  # ours [m]
+    far: float = 0.30  # ours: starts out of the threshold's reach [m]
     near_gap: float = 0.03  # ours: hand face 3 cm from the ring rim, under every threshold [m]
     hold_fraction: float = 0.2  # ours: share of an approach spent at the nearest point
 
@@ -127,36 +127,70 @@ def _plane_facing(name: str, centre: tuple[float, float, float], normal_yaw: flo
     return Plane(name, T, size)
 
 
-# Goal configuration of cases 1-2: the camera looks forward and down at a target
-# standing 45 cm in front of the robot, with the arm reaching between boards.
-Q_GOAL_DEG = (0.0, 25.0, 0.0, -105.0, 0.0, 130.0, 45.0)  # ours: a reach into a congested cell
+# Goal configuration of every case: the camera looks forward, right and down at a
+# target 30 cm ahead; from the start pose the target is in view (bottom of the image).
+Q_GOAL_DEG = (-20.0, -10.0, 0.0, -135.0, 0.0, 190.0, 45.0)  # ours: a reach into a congested cell
+TARGET_DEPTH = 0.30  # ours: inside the D405's 7-50 cm working range
+
+# Planes are placed in "corridor" coordinates: s along the horizontal line from the
+# start of ring 2, (0.04, 0, 0), towards its final position (yaw -21 deg), and a
+# lateral offset (left > 0). The straight visual path of ring 2 follows s.
+CORRIDOR_ORIGIN = (0.04, 0.0)  # ours: ring 2 at the start, projected on the floor
+CORRIDOR_YAW = np.deg2rad(-21.0)  # ours: heading of ring 2's unconstrained path
+
+
+def corridor_plane(name: str, s0: float, s1: float, lateral: float, z0: float, z1: float,
+                   yaw_offset_deg: float = 0.0) -> Plane:
+    """A vertical board spanning s in [s0, s1] and z in [z0, z1] [m] at ``lateral`` [m]
+    from the corridor axis, facing it, turned by ``yaw_offset_deg`` about the vertical."""
+    d = np.array([np.cos(CORRIDOR_YAW), np.sin(CORRIDOR_YAW), 0.0])
+    left = np.array([-np.sin(CORRIDOR_YAW), np.cos(CORRIDOR_YAW), 0.0])
+    c = np.array([*CORRIDOR_ORIGIN, 0.0]) + d * (s0 + s1) / 2 + left * lateral
+    c[2] = (z0 + z1) / 2
+    normal_yaw = CORRIDOR_YAW + (-np.pi / 2 if lateral > 0 else np.pi / 2)
+    normal_yaw += np.deg2rad(yaw_offset_deg)
+    T = make_T(t=c) @ Rz(normal_yaw) @ Ry(np.pi / 2)
+    return Plane(name, T, (z1 - z0, s1 - s0))
+
+
+def blocking_plane(name: str, T_world_ring: np.ndarray, sensor: int, gap: float,
+                   lean_deg: float, ahead: float, size: tuple[float, float]) -> Plane:
+    """A board that faces ring sensor ``sensor`` (1-based) of a ring at pose
+    ``T_world_ring``, ``gap`` [m] from the sensor, leaning by ``lean_deg`` towards the
+    ring's +z axis so that, with its partner, it forms a V that narrows ahead."""
+    R, c = T_world_ring[:3, :3], T_world_ring[:3, 3]
+    theta = 2 * np.pi * (sensor - 1) / N_SENSORS
+    n_s = R @ np.array([np.cos(theta), np.sin(theta), 0.0])
+    z = R[:, 2]
+    lean = np.deg2rad(lean_deg)
+    n_t = -(np.cos(lean) * n_s + np.sin(lean) * z)  # normal facing the ring, tilted
+    p0 = c + ahead * z + (RING2_RADIUS + gap) * n_s
+    y = np.cross(n_t, n_s)
+    y /= np.linalg.norm(y)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([np.cross(y, n_t), y, n_t])
+    T[:3, 3] = p0 - n_t * 0.005  # the board's face (not its centre) passes through p0
+    return Plane(name, T, size)
+
 
 SCENES: dict[str, Scene] = {
-    # Case 1 (Sec. V-A): two planes; the straight visual path crosses the right one.
+    # Case 1 (Sec. V-A): two boards; the visual path of ring 2 runs into the right one.
     "case1": Scene(
         q_goal_deg=Q_GOAL_DEG,
-        target_depth=0.25,  # ours: inside the D405's 7-50 cm working range
+        target_depth=TARGET_DEPTH,
         planes=(
-            _plane_facing("right", (0.45, -0.20, 0.45), np.pi / 2),   # ours
-            _plane_facing("left", (0.45, 0.20, 0.45), -np.pi / 2),    # ours
+            corridor_plane("right", 0.45, 0.90, -0.15, 0.30, 0.85),  # ours
+            corridor_plane("left", 0.10, 0.90, 0.175, 0.30, 0.80, 5.0),  # ours
         ),
     ),
-    # Case 2 (Sec. V-B): two ~parallel planes near the start, two angled near the goal.
-    "case2": Scene(
-        q_goal_deg=Q_GOAL_DEG,
-        target_depth=0.25,  # ours
-        planes=(
-            _plane_facing("start_right", (0.15, -0.25, 0.85), np.pi / 2, size=(0.4, 0.4)),  # ours
-            _plane_facing("start_left", (0.15, 0.25, 0.85), -np.pi / 2, size=(0.4, 0.4)),  # ours
-            _plane_facing("goal_a", (0.50, -0.12, 0.30), np.deg2rad(120), size=(0.3, 0.3)),  # ours
-            _plane_facing("goal_b", (0.50, 0.12, 0.30), np.deg2rad(-120), size=(0.3, 0.3)),  # ours
-        ),
-    ),
-    # Case 3 (Sec. V-C): no planes; starts converged; a hand approaches ring 2 four
+    # Case 2 (Sec. V-B): two ~parallel boards around ring 1 near the start, two boards
+    # in a V in front of ring 2 near the goal, filled in by case2_planes().
+    "case2": Scene(q_goal_deg=Q_GOAL_DEG, target_depth=TARGET_DEPTH),
+    # Case 3 (Sec. V-C): no boards; starts converged; a hand approaches ring 2 four
     # times (5-18 s) then ring 1 four times (20-30 s).
     "case3": Scene(
         q_goal_deg=Q_GOAL_DEG,
-        target_depth=0.25,  # ours
+        target_depth=TARGET_DEPTH,
         hand=HandPath(approaches=(
             ("ring2", 5.0, 3.0, np.deg2rad(0)), ("ring2", 8.3, 3.0, np.deg2rad(90)),
             ("ring2", 11.6, 3.0, np.deg2rad(180)), ("ring2", 14.9, 3.0, np.deg2rad(270)),
@@ -164,14 +198,28 @@ SCENES: dict[str, Scene] = {
             ("ring1", 25.0, 2.4, np.deg2rad(60)), ("ring1", 27.5, 2.4, np.deg2rad(300)),
         )),  # ours: timings inside the paper's 5-18 s and 20-30 s windows
     ),
-    # Sec. VI eq. (20): ring 2 passes between two parallel planes and the goal
-    # lies between them, each plane at the ring's threshold distance.
-    "parallel": Scene(
-        q_goal_deg=Q_GOAL_DEG,
-        target_depth=0.25,  # ours
-        planes=(),  # filled from the goal ring pose by parallel_planes()
-    ),
+    # Sec. VI eq. (20): ring 2 passes between two parallel boards and the goal lies
+    # between them, each at the ring's threshold distance (parallel_planes()).
+    "parallel": Scene(q_goal_deg=Q_GOAL_DEG, target_depth=TARGET_DEPTH),
 }
+
+CASE2_START_BOARDS = (
+    corridor_plane("start_right", -0.30, 0.20, -0.22, 0.55, 1.05),  # ours
+    corridor_plane("start_left", -0.30, 0.20, 0.16, 0.55, 1.05),  # ours
+)
+
+
+def case2_planes(T_world_ring2_goal: np.ndarray, threshold: float) -> tuple[Plane, ...]:
+    """Case 2 boards: the start pair and a V in front of ring 2's goal pose that faces
+    sensors 4 and 12 and stops ring 2 ~5 cm before the goal."""
+    ahead = -0.05  # ours: where the V stops ring 2, along its axis from the goal [m]
+    return CASE2_START_BOARDS + (
+        blocking_plane("goal_a", T_world_ring2_goal, 4, threshold, 35.0, ahead, (0.25, 0.3)),  # ours
+        blocking_plane("goal_b", T_world_ring2_goal, 12, threshold, 35.0, ahead, (0.25, 0.3)),  # ours
+    )
+
+
+PARALLEL_RETREAT = 0.15  # ours: start of the "parallel" run, ring 2 15 cm behind its goal [m]
 
 
 def parallel_planes(T_world_ring2_goal: np.ndarray, gap: float) -> tuple[Plane, Plane]:
@@ -187,8 +235,10 @@ def parallel_planes(T_world_ring2_goal: np.ndarray, gap: float) -> tuple[Plane, 
         z = -sgn * x  # normal towards the ring
         y = R[:, 2]   # plane extends along the ring axis
         Tp[:3, :3] = np.column_stack([np.cross(y, z), y, z])
-        Tp[:3, 3] = c + sgn * d * x + 0.1 * R[:, 2] * 0.0
-        planes.append(Plane(name, Tp, (0.3, 0.6)))
+        Tp[:3, 3] = c + sgn * d * x + 0.02 * R[:, 2]
+        # ours: 30 cm across, 16 cm along the ring axis (from 6 cm behind the ring centre,
+        # clear of the wrist, to 10 cm ahead of it)
+        planes.append(Plane(name, Tp, (0.3, 0.16)))
     return planes[0], planes[1]
 
 
@@ -216,7 +266,7 @@ def hand_pose(hand: HandPath, t: float, ring_poses: dict[str, np.ndarray],
             dist = hand.far + a * (near - hand.far)
             T = np.eye(4)
             z = -direction  # palm faces the ring
-            y = T_r[:3, 2]  # long side along the ring axis
+            y = np.cross(T_r[:3, 2], z)  # fingers tangential to the ring
             T[:3, :3] = np.column_stack([np.cross(y, z), y, z])
             T[:3, 3] = T_r[:3, 3] + dist * direction
             return T

@@ -73,41 +73,87 @@ class CBFQPResult:
     """One control step of the CBF-QP.
 
     Attributes:
-        u: commanded joint velocities (n,) [rad/s] (zero when the QP failed).
-        status: the QP status ("solved", "infeasible", "max_iter", "failed").
-        kappa: (m,) multipliers of the CBF rows (>= 0, thomas2024 eq. (13)).
+        u: commanded joint velocities (n,) [rad/s].
+        status: "solved"; "relaxed" when the hard QP was infeasible (or not solved
+            within its iteration budget) and the slack-relaxed QP gave u; "failed"
+            when both failed (then u = 0, the stated fallback).
+        qp_status: the hard QP's own status ("solved", "infeasible", "max_iter", "failed").
+        kappa: (m,) multipliers of the CBF rows (>= 0, thomas2024 eq. (13)); from the
+            relaxed QP when status is "relaxed".
         grad_L0: ||grad_u L(0, kappa*)|| = ||c - A^T kappa*|| (Sec. III-C stopping test).
-        solution: the raw QP solution.
+        slack: (m,) CBF violations accepted by the relaxed QP [same units as b] (0 if solved).
+        solution: the hard QP's raw solution.
     """
 
     u: np.ndarray
     status: str
+    qp_status: str
     kappa: np.ndarray
     grad_L0: float
+    slack: np.ndarray
     solution: QPSolution
 
 
-def solve_cbf_qp(solver: QPSolver, objective: Objective, ineq: Inequalities,
-                 qd_max: np.ndarray) -> CBFQPResult:
-    """Solve eq. (10) with box bounds -qd_max <= u <= qd_max [rad/s].
+class CBFQPController:
+    """Solves eq. (10) each control step, warm-started, with a stated fallback.
 
-    A QP that is not solved (infeasible, e.g. two opposite sensors both under
-    their threshold; or failed) yields the stated fallback u = 0 and its status,
-    which the caller logs as an event.
+    The hard QP of eq. (10) can be infeasible: two opposite sensors both under
+    their threshold ask for a_k^T u >= b_k > 0 and -a_k^T u >= b_k' > 0. The
+    paper does not say what its controller did then; ours (a standard CBF-QP
+    practice) re-solves with one non-negative slack s_k per CBF row,
+
+    .. math:: \min_{u, s} \tfrac12 u^T G u + c^T u + \tfrac{\rho}{2} \|s\|^2
+              \;\text{s.t.}\; a_k^T u + s_k \ge b_k,\; s \ge 0,\; u_{lower} \le u \le u_{upper}
+
+    which is always feasible; the run logs the event. If that fails too, u = 0.
+
+    Args:
+        n: joints; m: CBF rows.
+        solver: "proxsuite" or "osqp".
+        max_iter: iteration budget of each solve (bounds the time an infeasible QP costs).
+        slack_weight: rho. # ours: 1e4 makes a 1 mm/s violation cost like 0.1 rad/s of task error
     """
-    m = ineq.A.shape[0]
-    problem = QPProblem(
-        H=objective.H, g=objective.g, C=ineq.A, l=ineq.b, u=np.full(m, np.inf),
-        lb=-qd_max, ub=qd_max,
-    )
-    sol = solver.solve(problem)
-    kappa = lower_multipliers(sol)
-    grad_L0 = float(np.linalg.norm(objective.g - ineq.A.T @ kappa))  # eq. (14) at u = 0
-    if sol.status != "solved" or not np.all(np.isfinite(sol.x)):
-        u = np.zeros_like(objective.g)
-    else:
-        u = sol.x
-    return CBFQPResult(u=u, status=sol.status, kappa=kappa, grad_L0=grad_L0, solution=sol)
+
+    def __init__(self, n: int, m: int, solver: str = "proxsuite", max_iter: int = 200,
+                 slack_weight: float = 1e4) -> None:
+        self.n, self.m = n, m
+        self.hard = QPSolver(n, m, solver=solver, max_iter=max_iter)
+        # Always feasible, used rarely: cold-started, with a larger budget (OSQP needs
+        # ~2000 iterations on it because of the slack weight's scale).
+        self.relaxed = (QPSolver(n + m, m, solver=solver, max_iter=max(4000, 10 * max_iter),
+                                 warm_start=False) if m else None)
+        self.slack_weight = slack_weight
+
+    def step(self, objective: Objective, ineq: Inequalities, qd_max: np.ndarray) -> CBFQPResult:
+        """Solve eq. (10) with box bounds -qd_max <= u <= qd_max [rad/s]."""
+        n, m = self.n, self.m
+        problem = QPProblem(
+            H=objective.H, g=objective.g, C=ineq.A, l=ineq.b, u=np.full(m, np.inf),
+            lb=-qd_max, ub=qd_max,
+        )
+        sol = self.hard.solve(problem)
+        if sol.status == "solved" and np.all(np.isfinite(sol.x)):
+            kappa = lower_multipliers(sol)
+            grad_L0 = float(np.linalg.norm(objective.g - ineq.A.T @ kappa))  # eq. (14), u = 0
+            return CBFQPResult(sol.x, "solved", sol.status, kappa, grad_L0, np.zeros(m), sol)
+        if self.relaxed is not None:
+            H = np.zeros((n + m, n + m))
+            H[:n, :n] = objective.H
+            H[n:, n:] = self.slack_weight * np.eye(m)
+            relaxed = QPProblem(
+                H=H, g=np.concatenate([objective.g, np.zeros(m)]),
+                C=np.hstack([ineq.A, np.eye(m)]), l=ineq.b, u=np.full(m, np.inf),
+                lb=np.concatenate([-qd_max, np.zeros(m)]),
+                ub=np.concatenate([qd_max, np.full(m, np.inf)]),
+            )
+            rs = self.relaxed.solve(relaxed)
+            if rs.status == "solved" and np.all(np.isfinite(rs.x)):
+                kappa = lower_multipliers(rs)
+                grad_L0 = float(np.linalg.norm(objective.g - ineq.A.T @ kappa))
+                return CBFQPResult(rs.x[:n], "relaxed", sol.status, kappa, grad_L0,
+                                   rs.x[n:], sol)
+        return CBFQPResult(np.zeros(n), "failed", sol.status, np.zeros(m), float("nan"),
+                           np.zeros(m), sol)
 
 
 def least_squares_ibvs(objective: Objective) -> np.ndarray:

@@ -26,13 +26,15 @@ the Lagrangian :math:`L = \tfrac12 x^\top H x + g^\top x - \sum_k \kappa_k (a_k^
 :math:`\kappa_k \ge 0`; hence :math:`\kappa = \max(-z, 0)`, see :func:`lower_multipliers`.
 
 Statuses: ``"solved"`` (converged *and* the KKT residuals recomputed here are small),
-``"infeasible"`` (primal or dual infeasibility detected, or ``l > u``), ``"max_iter"``
-(iteration budget spent; infeasible problems often end here with proxsuite, which does
-not always certify infeasibility), ``"failed"`` (anything else, including a backend that
-claims success with large KKT residuals, and non-finite data). :meth:`QPSolver.solve`
-never raises for these: the controller applies its fallback. When the status is not
-``"solved"``, ``x``, ``z`` and ``z_box`` are the backend's last iterate with non-finite
-entries replaced by 0; they must not be applied as a command.
+``"infeasible"`` (primal or dual infeasibility certified, or ``l > u``), ``"max_iter"``
+(iteration budget spent), ``"failed"`` (anything else, including a backend that claims
+success with large KKT residuals, and non-finite data). OSQP certifies the infeasible
+CBF-QPs of two opposite sensors within ~50 iterations; proxsuite 0.8.0 did not certify any
+in our tests and runs to ``max_iter`` outer iterations (about 20-45 ms for ``max_iter=1000``
+with n = 7, m = 36, i.e. more than one 30 Hz period: lower ``max_iter`` if that matters).
+:meth:`QPSolver.solve` never raises for these: the controller applies its fallback. When
+the status is not ``"solved"``, ``x``, ``z`` and ``z_box`` are the backend's last iterate
+with non-finite entries replaced by 0; they must not be applied as a command.
 
 Backends are imported lazily, so importing this module costs only NumPy.
 """
@@ -94,8 +96,11 @@ class QPSolution(NamedTuple):
         z: (m,) duals of the ``C`` rows (sign convention in the module docstring).
         z_box: (n,) duals of the box bounds.
         status: one of :data:`STATUSES`.
-        iterations: backend iterations (proxsuite: total inner iterations; OSQP: ADMM
-            iterations, polishing not counted).
+        iterations: backend iterations. proxsuite: inner (Newton) iterations
+            ``info.iter``, several per outer ALM iteration, so it may exceed ``max_iter``,
+            which bounds the outer ones; OSQP: ADMM iterations (both stages, polishing
+            not counted), at most ``max_iter``. Summed over both attempts after a cold
+            retry (see :meth:`QPSolver.solve`).
         solve_time_s: wall time of the whole :meth:`QPSolver.solve` call [s], including
             data transfer to the backend and the KKT check.
         primal_residual: max bound violation of ``C x`` and ``x``, recomputed here on the
@@ -143,6 +148,8 @@ def _as_dense(problem: QPProblem, n: int | None = None, m: int | None = None) ->
             and ``C`` when not given).
     """
     H = np.asarray(problem.H, dtype=float)
+    if H.ndim == 2 and H.shape[0] == H.shape[1]:
+        H = 0.5 * (H + H.T)  # OSQP reads only the upper triangle, proxsuite all of H
     g = np.asarray(problem.g, dtype=float).reshape(-1)
     n_p = H.shape[0] if H.ndim == 2 else -1
     if n is None:
@@ -459,7 +466,8 @@ class QPSolver:
         m: number of rows of ``C`` (36 proximity-sensor rows in thomas2024); may be 0.
         solver: one of :data:`SOLVERS`.
         eps_abs: absolute tolerance handed to the backend (``eps_rel`` is 0).
-        max_iter: iteration budget per solve; bounds the time spent on an infeasible problem.
+        max_iter: iteration budget per attempt; bounds the time spent on an infeasible
+            problem (proxsuite: outer ALM iterations; OSQP: ADMM iterations).
         warm_start: start each solve from the previous solution. The warm start is
             forgotten by :meth:`reset` and after any solve whose status is not ``"solved"``.
         kkt_tol: relative tolerance of the check applied to every backend "success"; see
@@ -485,6 +493,8 @@ class QPSolver:
             raise QPDimensionError(f"need n >= 1 and m >= 0, got n={n}, m={m}")
         self.n, self.m, self.solver = int(n), int(m), solver
         self.kkt_tol = float(kkt_tol)
+        self.cold_retries = 0
+        """How many warm solves failed the KKT check and were repeated cold (for logging)."""
         self._backend = _BACKENDS[solver](self.n, self.m, eps_abs, max_iter, warm_start)
 
     def reset(self) -> None:
@@ -525,12 +535,13 @@ class QPSolver:
             np.any(np.isnan(a)) for a in (d.l, d.u, d.lb, d.ub)
         ):
             raw, status, kkt = self._trivial(d, "failed")
-        elif False:
+        elif np.any(d.l > d.u) or np.any(d.lb > d.ub):
             raw, status, kkt = self._trivial(d, "infeasible")
         else:
             was_warm = self._backend.is_warm
             raw, status, kkt = self._attempt(d)
             if raw.status == "solved" and status == "failed" and was_warm:
+                self.cold_retries += 1
                 self._backend.reset()
                 first_iterations = raw.iterations
                 raw, status, kkt = self._attempt(d)

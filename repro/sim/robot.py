@@ -242,3 +242,28 @@ class Robot:
         if not pts:
             return max_distance
         return float(min(pt[8] for pt in pts))
+
+
+def solve_ik(robot: Robot, frame: str, T_world_target: np.ndarray, q_init: np.ndarray,
+             iterations: int = 200, damping: float = 1e-6, tol: float = 1e-9) -> np.ndarray:
+    """Joint positions [rad] that put ``frame`` at ``T_world_target`` (damped least squares
+    on the SE(3) log error, within the joint limits), starting from ``q_init``.
+
+    Raises ReproError when the residual stays above ``tol`` [m, rad].
+    """
+    from repro.errors import ReproError
+
+    q = np.asarray(q_init, dtype=float).copy()
+    q_min, q_max = np.asarray(robot.limits.q_min), np.asarray(robot.limits.q_max)
+    target = pin.SE3(T_world_target)
+    err = np.full(6, np.inf)
+    for _ in range(iterations):
+        current = pin.SE3(robot.frame_pose(frame, q))
+        err = pin.log6(current.actInv(target)).vector  # twist in the frame, (v, w)
+        if np.linalg.norm(err) < tol:
+            return q
+        J = robot.frame_jacobian(frame, q, "local")
+        J = pin.Jlog6(current.actInv(target)) @ J
+        q = np.clip(q + J.T @ np.linalg.solve(J @ J.T + damping * np.eye(6), err),
+                    q_min, q_max)
+    raise ReproError(f"IK for {frame} did not converge: residual {np.linalg.norm(err):.3g}")
