@@ -27,7 +27,7 @@ from repro.errors import ConfigError
 from repro.geometry import inv_T
 from repro.runs.trace import TraceRecorder
 from repro.sensors.camera import Camera, move_dot_target, spawn_dot_target
-from repro.sensors.proximity import ProximityRing, exclude_from_rays
+from repro.sensors.proximity import ProximityRing, RingReading, exclude_from_rays
 from repro.sim.panda import PANDA_JOINTS, PANDA_LIMITS
 from repro.sim.robot import Robot, solve_ik
 from repro.sim.world import World, WorldConfig, pose_to_pb
@@ -82,6 +82,8 @@ def build(config: Thomas2024Config, out_dir: Path) -> Setup:
     planes = scene.planes
     if config.case == "parallel":
         planes = sc.parallel_planes(robot.frame_pose("ring2", q_goal), config.thresholds[1])
+    elif config.case == "case1":
+        planes = sc.case1_planes(robot.frame_pose("ring2", q_goal))
     elif config.case == "case2":
         planes = sc.case2_planes(robot.frame_pose("ring2", q_goal), config.thresholds[1])
 
@@ -237,24 +239,102 @@ def run(config: Thomas2024Config, out_dir: Path) -> Path:
     return out_dir
 
 
+@dataclass
+class StepOutput:
+    """What one control step computed (for the trace)."""
+
+    u: np.ndarray
+    status: str
+    e_4p: np.ndarray  # (8,) normalised; NaN when a dot is lost
+    kappa: np.ndarray  # (36,) or zeros without proximity
+    grad_L0: float
+    iterations: int
+    solve_s: float
+    max_slack: float
+    qp_status: str
+
+
+class Thomas2024Controller:
+    """Sensors -> features -> CBF-QP (10) for one robot state.
+
+    ``step`` takes the measurements (image points, ring readings) and returns the
+    joint-velocity command; it is what ``make bench`` times.
+    """
+
+    def __init__(self, setup: Setup, config: Thomas2024Config) -> None:
+        self.setup, self.config = setup, config
+        self.n = setup.robot.n
+        self.m = sum(r.spec.n_sensors for r in setup.rings) if config.proximity else 0
+        self.qp = CBFQPController(self.n, self.m, solver=config.qp_solver,
+                                  max_iter=config.qp_max_iter)
+        self.qd_max = np.asarray(PANDA_LIMITS.qd_max)
+        # Twist transformations (thomas2024 eq. (7), (9)): cV_e from the flange to the
+        # camera, jV_Nj from the ring's link to the ring frame S_j.
+        self.cV_e = twist_transform(inv_T(sc.CAMERA_PARENT[1] @ _optical_offset()))
+        self.ring_V = {name: twist_transform(inv_T(T)) for name, (_, T) in sc.RING_PARENTS.items()}
+        self.dirs = [r.spec.directions() for r in setup.rings]
+
+    def read_rings(self, q: np.ndarray) -> list[RingReading]:
+        """Ray-cast every ring at configuration ``q`` and update the normal estimators."""
+        out = []
+        for ring, est in zip(self.setup.rings, self.setup.estimators, strict=True):
+            T_wr = self.setup.robot.frame_pose(ring.spec.name, q)
+            reading = ring.read(self.setup.world.client, T_wr)
+            est.update(T_wr, reading.delta, reading.detected)
+            out.append(reading)
+        return out
+
+    def step(self, q: np.ndarray, uv: np.ndarray, found: np.ndarray, Z_exact: np.ndarray,
+             readings: list[RingReading]) -> StepOutput:
+        """One control step: thomas2024 eqs. (7)-(10)."""
+        setup, cfg, robot = self.setup, self.config, self.setup.robot
+        n, m = self.n, self.m
+        if not np.all(found):
+            return StepOutput(np.zeros(n), "no_features", np.full(8, np.nan), np.zeros(m),
+                              float("nan"), 0, 0.0, 0.0, "")
+        x = sc.INTRINSICS.to_normalized(uv)
+        e_4p = (x - setup.s_star).ravel()
+        A_rows, b_rows = [], []
+        if cfg.proximity:
+            for k, (ring, reading) in enumerate(zip(setup.rings, readings, strict=True)):
+                name = ring.spec.name
+                model = cfg.ring_models[k]
+                normals = setup.estimators[k].normals() if model != "coarse" else None
+                L = ring_interaction_matrix(self.dirs[k], reading.delta, ring.spec.radius,
+                                            model, normals)
+                parent = sc.RING_PARENTS[name][0]
+                J_S = self.ring_V[name] @ robot.frame_jacobian(parent, q, "local")  # jV_Nj J_Nj
+                ineq = cbf_inequalities(L, J_S, reading.delta, cfg.thresholds[k],
+                                        cfg.ring_gains[k])
+                A_rows.append(ineq.A)
+                b_rows.append(ineq.b)
+        Z = _depths(setup, uv, Z_exact)
+        L_x = interaction_matrix_points(x, Z)
+        J_4p = L_x @ self.cV_e @ robot.frame_jacobian("panda_link8", q, "local")  # eq. (7)
+        obj = ibvs_objective(J_4p, e_4p, cfg.lambda_4p, cfg.mu)
+        ineq = (Inequalities(np.vstack(A_rows), np.concatenate(b_rows)) if m
+                else Inequalities(np.zeros((0, n)), np.zeros(0)))
+        res = self.qp.step(obj, ineq, self.qd_max)
+        return StepOutput(res.u, res.status, e_4p, res.kappa, res.grad_L0,
+                          res.solution.iterations, res.solution.solve_time_s,
+                          float(np.max(res.slack)) if m else 0.0, res.qp_status)
+
+
 def _loop(setup: Setup, config: Thomas2024Config, rec: TraceRecorder,
           out_dir: Path) -> tuple[str, str]:
     robot, world = setup.robot, setup.world
     intr = sc.INTRINSICS
     n = robot.n
-    qd_max = np.asarray(PANDA_LIMITS.qd_max)
-    m = sum(r.spec.n_sensors for r in setup.rings) if config.proximity else 0
-    controller = CBFQPController(n, m, solver=config.qp_solver, max_iter=config.qp_max_iter)
+    ctrl = Thomas2024Controller(setup, config)
+    n_kappa = sum(r.spec.n_sensors for r in setup.rings)
     dt = world.config.control_dt
     n_steps = int(round(config.duration / dt))
     frames: list[np.ndarray] = []
-    T_cam_flange = inv_T(sc.CAMERA_PARENT[1] @ _optical_offset())
-    cV_e = twist_transform(T_cam_flange)
-    ring_V = {name: twist_transform(inv_T(T)) for name, (_, T) in sc.RING_PARENTS.items()}
     stop_reason = ""
     t_ctrl_total = 0.0
     lost_before = False
     prev_status = "solved"
+    step = 0
     for step in range(n_steps + 1):
         t = step * dt
         q, qd = robot.q(), robot.qd()
@@ -264,96 +344,61 @@ def _loop(setup: Setup, config: Thomas2024Config, rec: TraceRecorder,
         for i in range(n):
             row[f"qd{i + 1}"] = qd[i]
         T_hand = _move_hand(setup, t) if setup.scene.hand is not None else None
-
+        # --- sensors
         tic = time.perf_counter()
-        # --- camera (thomas2024 eq. (7)): 4 image points, normalised coordinates
         T_wc = robot.frame_pose("camera_optical", q)
         uv, found, Z_exact = setup.camera.measure(
             setup.render.client if setup.render is not None else world.client,
             T_wc, setup.scene.target, setup.T_world_target)
         t_render = time.perf_counter() - tic
+        readings = ctrl.read_rings(q)
+        for ring, reading in zip(setup.rings, readings, strict=True):
+            if np.any(reading.invalid):
+                rec.event(t, step, "sensor_nan", f"{ring.spec.name} sensors "
+                          f"{(np.flatnonzero(reading.invalid) + 1).tolist()} held last value")
         all_found = bool(np.all(found))
         if not all_found and not lost_before:
             rec.event(t, step, "feature_lost",
                       f"dots not found: {np.flatnonzero(~found).tolist()}; fallback u = 0")
         lost_before = not all_found
-        tic2 = time.perf_counter()
-        x = intr.to_normalized(uv) if all_found else np.full((4, 2), np.nan)
-        e_4p = (x - setup.s_star).ravel()
-        # --- proximity rings (Sec. II)
-        deltas, A_rows, b_rows = [], [], []
-        for k, (ring, est) in enumerate(zip(setup.rings, setup.estimators, strict=True)):
-            name = ring.spec.name
-            T_wr = robot.frame_pose(name, q)
-            reading = ring.read(world.client, T_wr)
-            if np.any(reading.invalid):
-                rec.event(t, step, "sensor_nan", f"{name} sensors "
-                          f"{(np.flatnonzero(reading.invalid) + 1).tolist()} held last value")
-            deltas.append(reading.delta)
-            est.update(T_wr, reading.delta, reading.detected)
-            if config.proximity:
-                model = config.ring_models[k]
-                normals = est.normals() if model != "coarse" else None
-                L = ring_interaction_matrix(ring.spec.directions(), reading.delta,
-                                            ring.spec.radius, model, normals)
-                parent = sc.RING_PARENTS[name][0]
-                J_S = ring_V[name] @ robot.frame_jacobian(parent, q, "local")  # jV_Nj J_Nj
-                ineq = cbf_inequalities(L, J_S, reading.delta, config.thresholds[k],
-                                        config.ring_gains[k])
-                A_rows.append(ineq.A)
-                b_rows.append(ineq.b)
-        # --- CBF-QP (10)
-        status = "no_features"
-        max_slack = 0.0
-        u = np.zeros(n)
-        grad_L0 = float("nan")
-        kappa = np.zeros(m)
-        iters, solve_s = 0, 0.0
-        if all_found:
-            Z = _depths(setup, uv, Z_exact)
-            L_x = interaction_matrix_points(x, Z)
-            J_4p = L_x @ cV_e @ robot.frame_jacobian("panda_link8", q, "local")
-            obj = ibvs_objective(J_4p, e_4p, config.lambda_4p, config.mu)
-            ineq = Inequalities(np.vstack(A_rows), np.concatenate(b_rows)) if m else \
-                Inequalities(np.zeros((0, n)), np.zeros(0))
-            res = controller.step(obj, ineq, qd_max)
-            status, u, kappa, grad_L0 = res.status, res.u, res.kappa, res.grad_L0
-            iters, solve_s = res.solution.iterations, res.solution.solve_time_s
-            max_slack = float(np.max(res.slack)) if m else 0.0
-            if status != prev_status and status != "solved":
-                rec.event(t, step, "qp_" + status,
-                          f"hard QP {res.qp_status}; " + ("slack-relaxed CBFs, max slack "
-                          f"{max_slack:.3g} m/s" if status == "relaxed" else "fallback u = 0"))
-            prev_status = status
-        t_ctrl = time.perf_counter() - tic2
+        # --- controller
+        tic = time.perf_counter()
+        out = ctrl.step(q, uv, found, Z_exact, readings)
+        t_ctrl = time.perf_counter() - tic
         t_ctrl_total += t_ctrl
+        if out.status != prev_status and out.status not in ("solved", "no_features"):
+            rec.event(t, step, "qp_" + out.status,
+                      f"hard QP {out.qp_status}; " + ("slack-relaxed CBFs, max slack "
+                      f"{out.max_slack:.3g} m/s" if out.status == "relaxed" else "fallback u = 0"))
+        prev_status = out.status
+        u, e_4p = out.u, out.e_4p
         e_norm = float(np.linalg.norm(e_4p)) if all_found else float("nan")
         # --- log
         for i in range(n):
             row[f"u{i + 1}"] = u[i]
         for i in range(4):
-            row[f"e{i + 1}_u"] = e_4p[2 * i] * intr.fu if all_found else float("nan")
-            row[f"e{i + 1}_v"] = e_4p[2 * i + 1] * intr.fv if all_found else float("nan")
+            row[f"e{i + 1}_u"] = e_4p[2 * i] * intr.fu
+            row[f"e{i + 1}_v"] = e_4p[2 * i + 1] * intr.fv
         for i in range(4):
             row[f"s{i + 1}_u"] = uv[i, 0]
             row[f"s{i + 1}_v"] = uv[i, 1]
         row["e_norm"] = e_norm
         row["n_found"] = int(np.sum(found))
-        for k, (ring, d) in enumerate(zip(setup.rings, deltas, strict=True)):
+        for k, (ring, reading) in enumerate(zip(setup.rings, readings, strict=True)):
             for i in range(ring.spec.n_sensors):
-                row[f"r{k + 1}_d{i + 1}"] = d[i]
+                row[f"r{k + 1}_d{i + 1}"] = reading.delta[i]
             for i in range(ring.spec.n_sensors):
-                row[f"r{k + 1}_cbf{i + 1}"] = d[i] - config.thresholds[k]
-        kap = kappa if m else np.zeros(sum(r.spec.n_sensors for r in setup.rings))
+                row[f"r{k + 1}_cbf{i + 1}"] = reading.delta[i] - config.thresholds[k]
+        kap = out.kappa if out.kappa.size == n_kappa else np.zeros(n_kappa)
         for k, ring in enumerate(setup.rings):
             off = k * ring.spec.n_sensors
             for i in range(ring.spec.n_sensors):
                 row[f"r{k + 1}_kappa{i + 1}"] = kap[off + i]
-        row["qp_status"] = status
-        row["qp_iter"] = iters
-        row["qp_max_slack"] = max_slack
-        row["qp_solve_s"] = solve_s
-        row["grad_L0"] = grad_L0
+        row["qp_status"] = out.status
+        row["qp_iter"] = out.iterations
+        row["qp_max_slack"] = out.max_slack
+        row["qp_solve_s"] = out.solve_s
+        row["grad_L0"] = out.grad_L0
         row["ctrl_s"] = t_ctrl
         row["render_s"] = t_render
         dists = {name: robot.min_distance(bid) for name, bid in setup.obstacle_ids.items()}
@@ -379,14 +424,15 @@ def _loop(setup: Setup, config: Thomas2024Config, rec: TraceRecorder,
                 stop_reason = f"||e_4p|| = {e_norm:.3g} <= eps_4p = {config.eps_4p}"
                 rec.event(t, step, "stop_e4p", stop_reason)
                 break
-            if status == "solved" and grad_L0 <= config.eps_qd:
-                stop_reason = (f"||grad L(0, kappa*)|| = {grad_L0:.3g} <= eps_qd = "
+            if out.status == "solved" and out.grad_L0 <= config.eps_qd:
+                stop_reason = (f"||grad L(0, kappa*)|| = {out.grad_L0:.3g} <= eps_qd = "
                                f"{config.eps_qd}")
                 rec.event(t, step, "stop_lagrangian", stop_reason)
                 break
         robot.set_velocity_command(u)
         world.step_control()
     rec.summary["n_steps"] = step + 1
+    rec.summary["sim_time_s"] = step * dt
     rec.summary["mean_control_s"] = t_ctrl_total / (step + 1)
     rec.summary["stop_reason"] = stop_reason or "duration reached"
     if frames:

@@ -174,15 +174,9 @@ def blocking_plane(name: str, T_world_ring: np.ndarray, sensor: int, gap: float,
 
 
 SCENES: dict[str, Scene] = {
-    # Case 1 (Sec. V-A): two boards; the visual path of ring 2 runs into the right one.
-    "case1": Scene(
-        q_goal_deg=Q_GOAL_DEG,
-        target_depth=TARGET_DEPTH,
-        planes=(
-            corridor_plane("right", 0.45, 0.90, -0.15, 0.30, 0.85),  # ours
-            corridor_plane("left", 0.10, 0.90, 0.175, 0.30, 0.80, 5.0),  # ours
-        ),
-    ),
+    # Case 1 (Sec. V-A): two boards forming a corridor around the goal, turned so that
+    # the straight visual path of ring 2 runs into the right one (case1_planes()).
+    "case1": Scene(q_goal_deg=Q_GOAL_DEG, target_depth=TARGET_DEPTH),
     # Case 2 (Sec. V-B): two ~parallel boards around ring 1 near the start, two boards
     # in a V in front of ring 2 near the goal, filled in by case2_planes().
     "case2": Scene(q_goal_deg=Q_GOAL_DEG, target_depth=TARGET_DEPTH),
@@ -202,6 +196,25 @@ SCENES: dict[str, Scene] = {
     # between them, each at the ring's threshold distance (parallel_planes()).
     "parallel": Scene(q_goal_deg=Q_GOAL_DEG, target_depth=TARGET_DEPTH),
 }
+
+def case1_planes(T_world_ring2_goal: np.ndarray) -> tuple[Plane, ...]:
+    """Case 1 boards: a corridor around ring 2's goal, 16.5 / 19 cm to its right / left,
+    turned by 25 deg about the goal so that the unconstrained path meets the right board."""
+    turn = np.deg2rad(-15.0)  # ours: the corridor's angle to the straight visual path
+    yaw = CORRIDOR_YAW + turn
+    d = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    left = np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+    g = T_world_ring2_goal[:3, 3]
+    boards = []
+    # (name, s from [m], s to [m] along the corridor from the goal, lateral [m], z0, z1 [m])
+    for name, s0, s1, lat, z0, z1 in (("right", -0.30, 0.25, -0.165, 0.30, 0.85),  # ours
+                                      ("left", -0.45, 0.25, 0.19, 0.30, 0.85)):  # ours
+        c = np.array([g[0], g[1], 0.0]) + d * (s0 + s1) / 2 + left * lat
+        c[2] = (z0 + z1) / 2
+        normal_yaw = yaw + (-np.pi / 2 if lat > 0 else np.pi / 2)
+        boards.append(Plane(name, make_T(t=c) @ Rz(normal_yaw) @ Ry(np.pi / 2), (z1 - z0, s1 - s0)))
+    return tuple(boards)
+
 
 CASE2_START_BOARDS = (
     corridor_plane("start_right", -0.30, 0.20, -0.22, 0.55, 1.05),  # ours

@@ -1,0 +1,47 @@
+# repro: two commands on a fresh machine with Python 3.11 -- `make figures`, `make test`.
+SHELL := /bin/bash
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: help figures results report test test-slow bench lint clean
+
+help:  ## list the targets
+	@grep -E '^[a-z-]+:.*##' $(MAKEFILE_LIST) | sed -E 's/:.*## /\t/' | expand -t 12
+
+$(STAMP): pyproject.toml
+	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), \
+	  f"repro needs Python 3.11 (pybullet 3.2.7 wheels stop there); found {sys.version.split()[0]}"'
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e '.[dev]'
+	@touch $(STAMP)
+
+figures: $(STAMP)  ## run missing/stale experiments, then every figure, claims.csv and REPORT.md
+	$(BIN)/repro results
+	$(BIN)/repro figures
+	$(BIN)/repro report
+
+results: $(STAMP)  ## run every experiment whose trace is missing or stale
+	$(BIN)/repro results
+
+report: $(STAMP)  ## regenerate REPORT.md from results/ and figures/
+	$(BIN)/repro report
+
+test: $(STAMP)  ## the test suite (slow runs excluded)
+	$(BIN)/pytest -q
+
+test-slow: $(STAMP)  ## only the long runs marked slow
+	$(BIN)/pytest -q -m slow
+
+bench: $(STAMP)  ## controller-step and QP timings -> results/bench.csv
+	$(BIN)/python -m repro.bench
+
+lint: $(STAMP)  ## ruff and mypy
+	$(BIN)/ruff check repro experiments tests
+	$(BIN)/mypy repro
+
+clean:  ## remove the virtual environment and caches (results and figures are kept)
+	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +
