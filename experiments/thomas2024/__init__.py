@@ -21,6 +21,12 @@ def _claims():  # type: ignore[no-untyped-def]
     return CLAIMS
 
 
+def _bench(results_dir):  # type: ignore[no-untyped-def]
+    from experiments.thomas2024.bench import bench
+
+    return bench(results_dir)
+
+
 EXPERIMENTS = Paper(
     key="thomas2024",
     experiments=(
@@ -41,4 +47,5 @@ EXPERIMENTS = Paper(
     ),
     figures=_figures,
     claims=_claims,
+    bench=_bench,
 )

@@ -15,7 +15,7 @@ import numpy as np
 import pybullet as p
 
 from experiments.thomas2024 import scene as sc
-from experiments.thomas2024.config import Thomas2024Config
+from experiments.thomas2024.config import RING_MODELS, Thomas2024Config
 from repro.control.cbf_qp import (
     CBFQPController,
     Inequalities,
@@ -23,7 +23,8 @@ from repro.control.cbf_qp import (
     ibvs_objective,
 )
 from repro.control.proximity_features import NormalEstimator, ring_interaction_matrix
-from repro.errors import ConfigError
+from repro.config import validate
+from repro.errors import ConfigError, UnknownChoiceError
 from repro.geometry import inv_T
 from repro.runs.trace import TraceRecorder
 from repro.sensors.camera import Camera, move_dot_target, spawn_dot_target
@@ -63,12 +64,27 @@ def _pose_list(T: np.ndarray) -> dict[str, list[float]]:
     return {"position": pos, "quaternion_xyzw": quat}
 
 
+def check_config(config: Thomas2024Config) -> None:
+    """Reject a malformed config before anything runs (ranges, choices, lengths)."""
+    validate(config)
+    if len(config.ring_gains) != 2 or len(config.thresholds) != 2 or len(config.ring_models) != 2:
+        raise ConfigError("ring_gains, thresholds and ring_models need one value per ring (2), "
+                          f"got {config.ring_gains}, {config.thresholds}, {config.ring_models}")
+    bad = [m for m in config.ring_models if m not in RING_MODELS]
+    if bad:
+        raise UnknownChoiceError("ring model", bad[0], RING_MODELS)
+    if len(config.q0_deg) != 7:
+        raise ConfigError(f"q0_deg needs 7 joint angles [deg], got {len(config.q0_deg)}")
+    q0 = np.deg2rad(config.q0_deg)
+    lo, hi = np.asarray(PANDA_LIMITS.q_min), np.asarray(PANDA_LIMITS.q_max)
+    if np.any(q0 < lo) or np.any(q0 > hi):
+        raise ConfigError(f"q0_deg {config.q0_deg} is outside the Panda's joint limits "
+                          f"[{np.rad2deg(lo).round(1).tolist()}, {np.rad2deg(hi).round(1).tolist()}] deg")
+
+
 def build(config: Thomas2024Config, out_dir: Path) -> Setup:
     """Create the world, robot, sensors and obstacles of ``config.case``."""
-    if len(config.ring_gains) != 2 or len(config.thresholds) != 2 or len(config.ring_models) != 2:
-        raise ConfigError("ring_gains, thresholds and ring_models need one value per ring (2)")
-    if len(config.q0_deg) != 7:
-        raise ConfigError(f"q0_deg needs 7 joint angles, got {len(config.q0_deg)}")
+    check_config(config)
     scene = sc.SCENES[config.case]
     wcfg = WorldConfig(physics_dt=1.0 / config.physics_rate, control_dt=1.0 / config.control_rate)
     world = World(wcfg)
@@ -222,6 +238,7 @@ def _move_hand(setup: Setup, t: float) -> np.ndarray:
 
 def run(config: Thomas2024Config, out_dir: Path) -> Path:
     """Run one thomas2024 case and write trace.csv, events.csv, manifest.json, scene.json."""
+    check_config(config)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     with TraceRecorder(out_dir, experiment=out_dir.name.split("__")[0], paper="thomas2024",

@@ -52,7 +52,8 @@ def ring_interaction_matrix(
     model: str,
     normals: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Stack the (m, 6) interaction matrix of a ring's m distances.
+    """Stack the (m, 6) interaction matrix of a ring's m distances (vectorised
+    eqs. (2), (5), (6); row i equals the single-sensor functions above).
 
     Args:
         n_S: (m, 3) sensor axes in the ring frame.
@@ -67,13 +68,18 @@ def ring_interaction_matrix(
         raise UnknownChoiceError("proximity model", model, MODELS)
     m = n_S.shape[0]
     L = np.zeros((m, 6))
-    for i in range(m):
-        if model == "coarse" or normals is None or not np.all(np.isfinite(normals[i])):
-            L[i] = L_delta_coarse(n_S[i])
-        elif model == "exact":
-            L[i] = L_delta_exact(n_S[i], normals[i], float(delta[i]), r)
-        else:
-            L[i] = L_delta_beta1(n_S[i], normals[i], float(delta[i]), r)
+    L[:, :3] = -n_S  # eq. (6)
+    if model == "coarse" or normals is None:
+        return L
+    ok = np.all(np.isfinite(normals), axis=1)
+    if not np.any(ok):
+        return L
+    n_T = normals[ok]
+    m_T = (delta[ok] + r)[:, None] * n_S[ok]
+    rows = np.hstack([n_T, np.cross(m_T, n_T)])  # eq. (5)
+    if model == "exact":
+        rows *= (-1.0 / np.einsum("ij,ij->i", n_T, n_S[ok]))[:, None]  # beta, eq. (2)
+    L[ok] = rows
     return L
 
 
@@ -146,36 +152,49 @@ class NormalEstimator:
         self._current = (T_world_ring.copy(), pts, detected.copy())
 
     def normals(self) -> np.ndarray:
-        """(m, 3) estimated n_T in the current ring frame; NaN rows where none."""
+        """(m, 3) estimated n_T in the current ring frame; NaN rows where none.
+
+        For each detected sensor i, the candidate points are the current and past
+        detections of sensors i-k..i+k, past points moved into the current ring frame
+        (tp_T_tq = T_now^-1 T_then); past points closer than ``min_separation`` to the
+        current detection are dropped (thomas2024 Sec. II-A1), so are points farther
+        than ``max_separation`` (another object). Vectorised over sensors.
+        """
         m = self.n_S.shape[0]
         out = np.full((m, 3), np.nan)
         if self._current is None:
             return out
         cfg = self.config
         T_now, pts_now, det_now = self._current
+        if not np.any(det_now):
+            return out
         T_now_inv = np.linalg.inv(T_now)
-        # Past points moved into the current ring frame: tp_T_tq = T_now^-1 T_then.
-        past = []
-        for T_then, pts, det in self._past:
+        pts = [pts_now]
+        det = [det_now]
+        for T_then, p_then, d_then in self._past:
             T_rel = T_now_inv @ T_then
-            past.append((pts @ T_rel[:3, :3].T + T_rel[:3, 3], det))
-        for i in np.flatnonzero(det_now):
-            idx = [(i + k) % m for k in range(-cfg.neighbours, cfg.neighbours + 1)]
-            p_i = pts_now[i]
-            cand = [pts_now[j] for j in idx if det_now[j]]
-            for pts, det in past:
-                for j in idx:
-                    if det[j]:
-                        d = np.linalg.norm(pts[j] - p_i)
-                        if cfg.min_separation <= d <= cfg.max_separation:
-                            cand.append(pts[j])
-            cand_arr = np.array(cand)
-            near = np.linalg.norm(cand_arr - p_i, axis=1) <= cfg.max_separation
-            n_plane = fit_plane_normal(cand_arr[near])
-            if n_plane is None:
-                continue
-            n_T = -n_plane  # eq. (4) gives the normal towards the plane; n_T faces the sensor
-            if float(n_T @ self.n_S[i]) > -cfg.min_facing:
-                continue
-            out[i] = n_T
+            pts.append(p_then @ T_rel[:3, :3].T + T_rel[:3, 3])
+            det.append(d_then)
+        P = np.stack(pts)  # (K, m, 3), K = 1 + history; index 0 = now
+        D = np.stack(det)  # (K, m)
+        sensors = np.flatnonzero(det_now)
+        offsets = np.arange(-cfg.neighbours, cfg.neighbours + 1)
+        nbr = (sensors[:, None] + offsets[None, :]) % m  # (s, w)
+        cand = P[:, nbr]  # (K, s, w, 3)
+        valid = D[:, nbr]  # (K, s, w)
+        p_i = pts_now[sensors]  # (s, 3)
+        dist = np.linalg.norm(cand - p_i[None, :, None, :], axis=-1)
+        keep = valid & (dist <= cfg.max_separation)
+        keep[1:] &= dist[1:] >= cfg.min_separation  # past points near the current one dropped
+        w = keep.astype(float)
+        B = np.einsum("ksw,kswa,kswb->sab", w, cand, cand)  # eq. (4): sum p p^T
+        b = np.einsum("ksw,kswa->sa", w, cand)  # sum p
+        count = w.sum(axis=(0, 2))
+        n_plane = np.einsum("sab,sb->sa", np.linalg.pinv(B, rcond=1e-6), b)
+        norm = np.linalg.norm(n_plane, axis=1)
+        good = (count >= 2) & np.isfinite(norm) & (norm > 1e-12)
+        n_T = -n_plane / np.where(good, norm, 1.0)[:, None]  # n_T faces the sensor
+        facing = np.einsum("sa,sa->s", n_T, self.n_S[sensors]) <= -cfg.min_facing
+        good &= facing
+        out[sensors[good]] = n_T[good]
         return out

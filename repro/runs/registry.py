@@ -79,6 +79,9 @@ class Paper:
     experiments: tuple[Experiment, ...]
     figures: Callable[[Path, Path], list[Path]] | None = None
     claims: Callable[[], Sequence[Any]] | None = None
+    #: ``bench(results_dir)`` -> rows (dicts with benchmark, median_s, p95_s, n) for
+    #: ``make bench``; may read the committed traces to replay realistic states.
+    bench: Callable[[Path], list[dict[str, Any]]] | None = None
 
 
 # --------------------------------------------------------------------------- discovery

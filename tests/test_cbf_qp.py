@@ -1,0 +1,269 @@
+"""Tests of repro.control.cbf_qp: the IBVS cost and CBF rows of thomas2024 eqs. (8)-(10),
+the controller's solution against closed forms (eq. (19), one active row, the eq. (21)
+local minimum), its infeasibility fallback, and an exact active-set reference (daqp) on
+random QPs of the paper's size.
+"""
+
+from __future__ import annotations
+
+import time
+
+import daqp  # exact active-set reference; dev dependency in pyproject.toml
+import numpy as np
+import pytest
+
+from repro.control.cbf_qp import (
+    CBFQPController,
+    Inequalities,
+    Objective,
+    cbf_inequalities,
+    ibvs_objective,
+    least_squares_ibvs,
+)
+from repro.control.qp import SOLVERS
+from repro.sim.panda import PANDA_LIMITS
+
+N, M = 7, 36  # Panda joints; 2 rings x 18 sensors (thomas2024)
+QD_MAX = np.array(PANDA_LIMITS.qd_max)  # Franka: 2.175 x 4, 2.61 x 3 [rad/s]
+WIDE = np.full(N, 1e3)  # a box that never binds [rad/s]
+
+
+def _well_conditioned_J(rng: np.random.Generator) -> np.ndarray:
+    """A random (8, N) feature Jacobian with singular values in [0.5, 2].
+
+    The QP backends stop on an absolute dual residual eps_abs = 1e-9, so u is accurate to
+    about eps_abs / lambda_min(G); these tests ask for 1e-8 on u, hence lambda_min(G) >= 0.25
+    (the paper's rank-6 case, lambda_min(G) = mu, is test_rank_deficient_task_accuracy).
+    """
+    U, _, Vt = np.linalg.svd(rng.normal(size=(8, N)), full_matrices=False)
+    return U @ np.diag(rng.uniform(0.5, 2.0, N)) @ Vt
+
+
+def _objective(rng: np.random.Generator, scale: float = 1.0) -> tuple[Objective, np.ndarray,
+                                                                       np.ndarray]:
+    J = _well_conditioned_J(rng)
+    e = scale * rng.normal(size=8)
+    return ibvs_objective(J, e, lambda_4p=0.8, mu=0.01), J, e
+
+
+def _kkt_check(obj: Objective, A: np.ndarray, b: np.ndarray, u: np.ndarray,
+               kappa: np.ndarray, tol: float) -> None:
+    """KKT of min 1/2 u'Gu + c'u s.t. A u >= b (box inactive): G u + c - A' kappa = 0,
+    kappa >= 0, A u >= b, kappa (A u - b) = 0."""
+    np.testing.assert_allclose(obj.H @ u + obj.g - A.T @ kappa, 0.0, atol=tol)
+    assert np.all(kappa >= 0.0)
+    assert np.all(A @ u >= b - tol)
+    np.testing.assert_allclose(kappa * (A @ u - b), 0.0, atol=tol)
+
+
+# --------------------------------------------------------------------------------------
+# The pieces
+# --------------------------------------------------------------------------------------
+
+
+def test_ibvs_objective_formula() -> None:
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(8, N))
+    e = rng.normal(size=8)
+    obj = ibvs_objective(J, e, lambda_4p=1.7, mu=0.01)
+    assert isinstance(obj, Objective)
+    np.testing.assert_allclose(obj.H, J.T @ J + 0.01 * np.eye(N), rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(obj.g, 1.7 * J.T @ e, rtol=1e-14, atol=1e-14)
+    # eq. (19): the unconstrained minimiser -G^-1 c.
+    u = least_squares_ibvs(obj)
+    np.testing.assert_allclose(obj.H @ u, -obj.g, atol=1e-12)
+
+
+def test_cbf_inequalities_formula() -> None:
+    rng = np.random.default_rng(1)
+    L = rng.normal(size=(18, 6))
+    J_S = rng.normal(size=(6, N))
+    delta = rng.uniform(0.0, 1.0, 18)
+    ineq = cbf_inequalities(L, J_S, delta, delta_star=0.15, gain=2.5)
+    assert isinstance(ineq, Inequalities)
+    np.testing.assert_allclose(ineq.A, L @ J_S, atol=1e-14)
+    np.testing.assert_allclose(ineq.b, -2.5 * (delta - 0.15), atol=1e-15)
+    # Above the threshold u = 0 is allowed (b < 0); below, the sensor must move away (b > 0).
+    assert np.all((ineq.b < 0) == (delta > 0.15))
+
+
+# --------------------------------------------------------------------------------------
+# Closed forms, both solvers
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_no_active_constraint_gives_least_squares(solver: str) -> None:
+    rng = np.random.default_rng(2)
+    ctrl = CBFQPController(N, M, solver=solver)
+    for _ in range(5):
+        obj, _, _ = _objective(rng, scale=0.05)
+        u_ls = least_squares_ibvs(obj)
+        assert np.all(np.abs(u_ls) < QD_MAX)  # the box does not bind either
+        A = rng.normal(size=(M, N))
+        b = A @ u_ls - rng.uniform(0.1, 1.0, M)  # every row strictly satisfied at u_ls
+        res = ctrl.step(obj, Inequalities(A, b), QD_MAX)
+        assert res.status == "solved" and res.qp_status == "solved"
+        np.testing.assert_allclose(res.u, u_ls, atol=1e-8)
+        np.testing.assert_allclose(res.kappa, 0.0, atol=1e-8)
+        np.testing.assert_array_equal(res.slack, 0.0)
+        assert res.grad_L0 == pytest.approx(np.linalg.norm(obj.g), rel=1e-6)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_single_active_row_matches_closed_form(solver: str) -> None:
+    """min 1/2 u'Gu + c'u s.t. a'u >= b with the row active:
+    kappa = (b - a'u_ls) / (a'G^-1 a), u = u_ls + kappa G^-1 a."""
+    rng = np.random.default_rng(3)
+    ctrl = CBFQPController(N, 3, solver=solver)
+    for _ in range(5):
+        obj, _, _ = _objective(rng)
+        u_ls = least_squares_ibvs(obj)
+        a = rng.normal(size=N)
+        b = float(a @ u_ls) + rng.uniform(0.2, 1.0)  # u_ls violates the row
+        Ginv_a = np.linalg.solve(obj.H, a)
+        kappa = (b - a @ u_ls) / (a @ Ginv_a)
+        u = u_ls + kappa * Ginv_a
+        # Two more rows, inactive at the solution.
+        A = np.vstack([a, rng.normal(size=(2, N))])
+        bb = np.r_[b, A[1:] @ u - 0.5]
+        res = ctrl.step(obj, Inequalities(A, bb), WIDE)
+        assert res.status == "solved"
+        np.testing.assert_allclose(res.u, u, atol=1e-8)
+        np.testing.assert_allclose(res.kappa, [kappa, 0.0, 0.0], atol=1e-7 * max(1.0, kappa))
+        assert a @ res.u == pytest.approx(b, abs=1e-8)
+        _kkt_check(obj, A, bb, res.u, res.kappa, 1e-7)
+        assert res.grad_L0 == pytest.approx(np.linalg.norm(obj.g - A.T @ res.kappa), abs=1e-12)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_blocked_optimum_is_a_local_minimum(solver: str) -> None:
+    """thomas2024 eq. (21): c = kappa0 a and b = 0 (a sensor at its threshold, the task
+    pushing straight into it): u* = 0, kappa = kappa0 and grad_u L(0, kappa) = 0."""
+    rng = np.random.default_rng(4)
+    ctrl = CBFQPController(N, M, solver=solver)
+    for _ in range(5):
+        J = _well_conditioned_J(rng)
+        a = rng.normal(size=N)
+        kappa0 = rng.uniform(0.1, 2.0)
+        lam = 0.8
+        e = np.linalg.pinv(J.T) @ (kappa0 * a) / lam  # lambda J^T e = kappa0 a
+        obj = ibvs_objective(J, e, lam, 0.01)
+        np.testing.assert_allclose(obj.g, kappa0 * a, atol=1e-12)
+        assert np.linalg.norm(least_squares_ibvs(obj)) > 0.01  # the task alone would move
+        A = np.vstack([a, rng.normal(size=(M - 1, N))])
+        b = np.r_[0.0, -rng.uniform(0.1, 1.0, M - 1)]  # the other sensors far away
+        res = ctrl.step(obj, Inequalities(A, b), QD_MAX)
+        assert res.status == "solved"
+        np.testing.assert_allclose(res.u, 0.0, atol=1e-8)
+        assert res.kappa[0] == pytest.approx(kappa0, rel=1e-6)
+        np.testing.assert_allclose(res.kappa[1:], 0.0, atol=1e-8)
+        assert res.grad_L0 == pytest.approx(np.linalg.norm(obj.g - A.T @ res.kappa), abs=1e-12)
+        assert res.grad_L0 < 1e-6 * np.linalg.norm(obj.g)
+        # Not a local minimum when the row is pushed the other way: grad_L0 = ||c||.
+        res2 = ctrl.step(Objective(obj.H, -obj.g), Inequalities(A, b), QD_MAX)
+        np.testing.assert_allclose(res2.kappa, 0.0, atol=1e-8)
+        assert res2.grad_L0 == pytest.approx(np.linalg.norm(obj.g), rel=1e-6)
+
+
+# --------------------------------------------------------------------------------------
+# Infeasible CBF rows: the relaxed fallback
+# --------------------------------------------------------------------------------------
+
+
+def _daqp(H: np.ndarray, g: np.ndarray, A: np.ndarray, b: np.ndarray, lb: np.ndarray,
+          ub: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exact solution of min 1/2 x'Hx + g'x s.t. A x >= b, lb <= x <= ub, and the row
+    multipliers kappa >= 0 (daqp's lam has proxsuite's sign: kappa = -lam)."""
+    n, m = H.shape[0], A.shape[0]
+    x, _, exitflag, info = daqp.solve(
+        np.ascontiguousarray(H), np.ascontiguousarray(g), np.ascontiguousarray(A),
+        np.r_[ub, np.full(m, np.inf)], np.r_[lb, b],
+    )  # fmt: skip
+    assert exitflag == 1, exitflag
+    return np.asarray(x), np.maximum(-np.asarray(info["lam"])[n:], 0.0)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_infeasible_rows_are_relaxed(solver: str) -> None:
+    """Two opposite sensors both under their threshold: a'u >= 0.5 and -a'u >= 0.5."""
+    rng = np.random.default_rng(5)
+    ctrl = CBFQPController(N, M, solver=solver)
+    obj, _, _ = _objective(rng, scale=0.1)
+    A = rng.normal(size=(M, N))
+    A[1] = -A[0]
+    b = np.r_[0.5, 0.5, np.full(M - 2, -10.0)]
+    # Warm up (imports, first setup) on a feasible problem, then time the infeasible one.
+    assert ctrl.step(obj, Inequalities(A, np.full(M, -10.0)), QD_MAX).status == "solved"
+    t0 = time.perf_counter()
+    res = ctrl.step(obj, Inequalities(A, b), QD_MAX)
+    elapsed = time.perf_counter() - t0
+    assert elapsed < 0.5
+    assert res.status == "relaxed"
+    assert res.qp_status in ("infeasible", "max_iter")
+    assert np.all(np.isfinite(res.u))
+    assert np.all(np.abs(res.u) <= QD_MAX + 1e-9)
+    assert res.slack.shape == (M,)
+    assert np.all(res.slack >= -1e-9)
+    assert res.slack[0] > 0 and res.slack[1] > 0
+    assert res.slack[0] + res.slack[1] >= 1.0 - 1e-6  # the two rows conflict by 1
+    np.testing.assert_allclose(res.slack[2:], 0.0, atol=1e-8)
+    assert np.all(A @ res.u + res.slack >= b - 1e-8)
+    # It is the slack QP's exact solution (rho = slack_weight).
+    H = np.zeros((N + M, N + M))
+    H[:N, :N] = obj.H
+    H[N:, N:] = ctrl.slack_weight * np.eye(M)
+    x_ref, kappa_ref = _daqp(H, np.r_[obj.g, np.zeros(M)], np.hstack([A, np.eye(M)]), b,
+                             np.r_[-QD_MAX, np.zeros(M)], np.r_[QD_MAX, np.full(M, np.inf)])
+    np.testing.assert_allclose(res.u, x_ref[:N], atol=1e-6)
+    np.testing.assert_allclose(res.slack, x_ref[N:], atol=1e-6)
+    np.testing.assert_allclose(res.kappa, kappa_ref, atol=1e-5 * max(1.0, kappa_ref.max()))
+    # The controller recovers once the conflict is gone.
+    res3 = ctrl.step(obj, Inequalities(A, np.full(M, -10.0)), QD_MAX)
+    assert res3.status == "solved"
+    np.testing.assert_allclose(res3.u, least_squares_ibvs(obj), atol=1e-8)
+
+
+# --------------------------------------------------------------------------------------
+# Random CBF-QPs of the paper's size vs daqp
+# --------------------------------------------------------------------------------------
+
+
+def _random_cbf_qp(rng: np.random.Generator) -> tuple[Objective, Inequalities]:
+    """IBVS cost (pushing up to 3x beyond the velocity limits) and 36 CBF rows: about a
+    third of the sensors near or under their threshold, built around a feasible u0."""
+    obj, _, _ = _objective(rng, scale=rng.uniform(0.2, 3.0))
+    L = rng.normal(size=(M, 6))
+    L[:, :3] /= np.linalg.norm(L[:, :3], axis=1, keepdims=True)
+    J_S = rng.normal(size=(6, N)) * 0.5
+    A = L @ J_S
+    u0 = rng.uniform(-0.5, 0.5, N) * QD_MAX
+    b = A @ u0 - rng.exponential(0.2, M)
+    far = rng.random(M) < 0.65
+    b[far] -= rng.uniform(1.0, 3.0, far.sum())  # nothing detected: far from binding
+    return obj, Inequalities(A, b)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_random_cbf_qps_match_daqp(solver: str) -> None:
+    rng = np.random.default_rng(6)
+    ctrl = CBFQPController(N, M, solver=solver)
+    n_active_rows = n_active_box = 0
+    for k in range(100):
+        obj, ineq = _random_cbf_qp(rng)
+        x_ref, kappa_ref = _daqp(obj.H, obj.g, ineq.A, ineq.b, -QD_MAX, QD_MAX)
+        res = ctrl.step(obj, ineq, QD_MAX)
+        assert res.status == "solved", (k, res.qp_status)
+        np.testing.assert_allclose(res.u, x_ref, atol=1e-6, err_msg=f"problem {k}")
+        row_active = np.abs(ineq.A @ x_ref - ineq.b) < 1e-9
+        box_active = np.abs(np.abs(x_ref) - QD_MAX) < 1e-9
+        n_active_rows += int(row_active.any())
+        n_active_box += int(box_active.any())
+        if row_active.sum() + box_active.sum() <= N:  # LICQ: unique multipliers
+            np.testing.assert_allclose(res.kappa, kappa_ref,
+                                       atol=1e-5 * max(1.0, kappa_ref.max()),
+                                       err_msg=f"problem {k}")
+        assert res.grad_L0 == pytest.approx(np.linalg.norm(obj.g - ineq.A.T @ kappa_ref),
+                                            rel=1e-4, abs=1e-6)
+    # The set exercises both kinds of constraint.
+    assert n_active_rows > 50 and n_active_box > 20, (n_active_rows, n_active_box)

@@ -1,0 +1,151 @@
+"""Short runs of every thomas2024 experiment, checked against committed reference traces,
+plus determinism, render-vs-exact agreement and fault handling.
+
+Reference traces (tests/reference/thomas2024/<name>.csv) are regenerated with
+``python tests/make_reference.py`` after an intended behaviour change.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import experiments.thomas2024.config as C
+from experiments.thomas2024 import EXPERIMENTS
+from experiments.thomas2024.run import build, run
+from repro.runs.trace import load_run
+from repro.sensors.camera import project_points
+from repro.sensors.proximity import ProximityRing
+
+REF_DIR = Path(__file__).parent / "reference" / "thomas2024"
+SHORT = 1.5  # [s] of simulated time per reference run
+TIMING_COLUMNS = ("ctrl_s", "render_s", "qp_solve_s")
+#: Columns compared with the reference, and their absolute tolerances.
+COMPARED = {"q": 1e-5, "u": 1e-4, "e": 1e-3, "cbf": 1e-5, "dist": 1e-5}
+
+
+def short_config(name: str, **kw: object) -> C.Thomas2024Config:
+    exp = next(e for e in EXPERIMENTS.experiments if e.name == name)
+    return dataclasses.replace(exp.config_cls(), duration=SHORT, camera_mode="exact", **kw)
+
+
+def _compared_columns(df: pd.DataFrame) -> dict[str, float]:
+    cols = {}
+    for c in df.columns:
+        for prefix, tol in COMPARED.items():
+            if (c.startswith(prefix) and c[len(prefix):len(prefix) + 1].isdigit()) or (
+                    prefix == "cbf" and "_cbf" in c) or (prefix == "dist" and
+                                                          c.startswith("dist_")):
+                cols[c] = tol
+    return cols
+
+
+@pytest.mark.parametrize("name", [e.name for e in EXPERIMENTS.experiments])
+def test_short_run_matches_reference(name: str, tmp_path: Path) -> None:
+    out = run(short_config(name), tmp_path / name)
+    got = load_run(out)
+    assert got.manifest["status"] == "completed"
+    ref_path = REF_DIR / f"{name}.csv"
+    ref = pd.read_csv(ref_path)
+    df = got.trace
+    assert len(df) == len(ref)
+    cols = _compared_columns(ref)
+    assert len(cols) > 40
+    for c, tol in cols.items():
+        np.testing.assert_allclose(df[c].to_numpy(float), ref[c].to_numpy(float), atol=tol,
+                                   err_msg=f"{name}: column {c}")
+
+
+def test_same_config_gives_identical_traces(tmp_path: Path) -> None:
+    cfg = short_config("case1", duration=1.0)
+    a = load_run(run(cfg, tmp_path / "a")).trace.drop(columns=list(TIMING_COLUMNS))
+    b = load_run(run(cfg, tmp_path / "b")).trace.drop(columns=list(TIMING_COLUMNS))
+    pd.testing.assert_frame_equal(a, b, check_exact=True)
+
+
+def test_seed_changes_the_noise(tmp_path: Path) -> None:
+    a = load_run(run(short_config("case1", duration=0.5), tmp_path / "a")).trace
+    b = load_run(run(short_config("case1", duration=0.5, seed=7), tmp_path / "b")).trace
+    detected = a["r2_d1"] < 1.0
+    assert not np.array_equal(a["r2_d1"], b["r2_d1"]) or not detected.any()
+
+
+def test_rendered_detection_matches_exact_projection(tmp_path: Path) -> None:
+    """The camera in render mode (PyBullet image + OpenCV) agrees with exact projection
+    within 0.5 px on states along the case-1 path."""
+    ref = pd.read_csv(REF_DIR / "case1.csv")
+    cfg = dataclasses.replace(C.Case1Config(), camera_mode="render")
+    setup = build(cfg, tmp_path)
+    try:
+        errors = []
+        for _, row in ref.iloc[::5].iterrows():
+            q = row[[f"q{i}" for i in range(1, 8)]].to_numpy(float)
+            T_wc = setup.robot.frame_pose("camera_optical", q)
+            uv, found, _ = setup.camera.measure(setup.render.client, T_wc, setup.scene.target,
+                                                setup.T_world_target)
+            uv_exact, _ = project_points(setup.camera.intrinsics, T_wc,
+                                         setup.scene.target.points_world(setup.T_world_target))
+            assert found.all()
+            errors.append(np.abs(uv - uv_exact).max())
+        assert max(errors) < 0.5, max(errors)
+    finally:
+        setup.world.close()
+        setup.render.close()
+
+
+def test_sensor_nan_is_handled_and_logged(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    original = ProximityRing.cast
+
+    def faulty(self: ProximityRing, client: int, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d, body = original(self, client, T)
+        d = d.copy()
+        d[3] = np.nan
+        return d, body
+
+    monkeypatch.setattr(ProximityRing, "cast", faulty)
+    got = load_run(run(short_config("case1", duration=0.3), tmp_path / "nan"))
+    assert got.manifest["status"] == "completed"
+    assert (got.events["kind"] == "sensor_nan").any()
+    assert np.isfinite(got.trace["r1_d4"]).all() and np.isfinite(got.trace["u1"]).all()
+
+
+def test_lost_target_gives_zero_velocity_and_event(tmp_path: Path) -> None:
+    # Start looking away from the target: every dot is out of the image.
+    cfg = short_config("case1", duration=0.3, q0_deg=(120.0, -60.0, 0.0, -90.0, 0.0, 100.0, 45.0))
+    got = load_run(run(cfg, tmp_path / "lost"))
+    assert (got.events["kind"] == "feature_lost").any()
+    assert (got.trace["qp_status"] == "no_features").all()
+    assert np.allclose(got.trace[[f"u{i}" for i in range(1, 8)]].to_numpy(float), 0.0)
+
+
+def test_crash_leaves_partial_trace_and_manifest(tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    from experiments.thomas2024 import run as run_module
+
+    calls = {"n": 0}
+    original = run_module.Thomas2024Controller.step
+
+    def boom(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        calls["n"] += 1
+        if calls["n"] > 5:
+            raise RuntimeError("injected fault")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(run_module.Thomas2024Controller, "step", boom)
+    with pytest.raises(RuntimeError, match="injected fault"):
+        run(short_config("case1", duration=0.5), tmp_path / "crash")
+    got = load_run(tmp_path / "crash")
+    assert got.manifest["status"] == "crashed"
+    assert "injected fault" in got.manifest["reason"]
+    assert len(got.trace) == 5
+
+
+def test_bad_config_rejected_before_running(tmp_path: Path) -> None:
+    from repro.errors import ConfigError
+
+    with pytest.raises(ConfigError):
+        run(dataclasses.replace(C.Case1Config(), q0_deg=(0.0, 1.0)), tmp_path / "bad")
