@@ -30,7 +30,8 @@ COMPARED = {"q": 1e-5, "u": 1e-4, "e": 1e-3, "cbf": 1e-5, "dist": 1e-5}
 
 def short_config(name: str, **kw: object) -> C.Thomas2024Config:
     exp = next(e for e in EXPERIMENTS.experiments if e.name == name)
-    return dataclasses.replace(exp.config_cls(), duration=SHORT, camera_mode="exact", **kw)
+    fields: dict[str, object] = {"duration": SHORT, "camera_mode": "exact", **kw}
+    return dataclasses.replace(exp.config_cls(), **fields)
 
 
 def _compared_columns(df: pd.DataFrame) -> dict[str, float]:
@@ -124,7 +125,9 @@ def test_lost_target_gives_zero_velocity_and_event(tmp_path: Path) -> None:
 
 def test_crash_leaves_partial_trace_and_manifest(tmp_path: Path,
                                                  monkeypatch: pytest.MonkeyPatch) -> None:
-    from experiments.thomas2024 import run as run_module
+    import importlib
+
+    run_module = importlib.import_module("experiments.thomas2024.run")
 
     calls = {"n": 0}
     original = run_module.Thomas2024Controller.step

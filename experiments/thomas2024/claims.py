@@ -75,6 +75,13 @@ def _status(ok: bool) -> str:
     return "reproduced" if ok else "not_reproduced"
 
 
+def _verdict(measured: str, checks: dict[str, bool]) -> ClaimResult:
+    """A result whose text names every sub-check that failed (the reason for a 'no')."""
+    failed = [name for name, ok in checks.items() if not ok]
+    text = measured + (f" -- not met: {'; '.join(failed)}" if failed else "")
+    return ClaimResult(text, _status(not failed))
+
+
 # ------------------------------------------------------------------ claim 1
 def check_1(runs: dict[str, RunFiles]) -> ClaimResult:
     run = runs["case1"]
@@ -86,12 +93,14 @@ def check_1(runs: dict[str, RunFiles]) -> ClaimResult:
     cbf_min = float(cbf[worst].min())
     t_worst = float(df["t"].iloc[int(np.argmin(cbf[worst].to_numpy()))])
     dmin = float(df["dist_min"].min())
-    conv = e_final <= CONVERGED_FRACTION * e0
-    ok = conv and cbf_min >= -NOISE_MARGIN and dmin > 0
-    return ClaimResult(
+    return _verdict(
         f"||e_4p|| {e0:.0f} -> {e_final:.1f} px ({run.manifest['summary'].get('stop_reason')}); "
         f"min CBF {cbf_min * 100:.2f} cm ({worst.replace('_cbf', ' sensor ')} at {t_worst:.2f} s); "
-        f"min true distance {dmin * 100:.2f} cm", _status(ok))
+        f"min true distance {dmin * 100:.2f} cm",
+        {f"||e_4p|| under {CONVERGED_FRACTION:.0%} of its start": e_final <= CONVERGED_FRACTION * e0,
+         f"CBFs >= -{NOISE_MARGIN * 100:g} cm (a sensor detected the obstacle already inside "
+         "its threshold)": cbf_min >= -NOISE_MARGIN,
+         "no contact": dmin > 0})
 
 
 # ------------------------------------------------------------------ claim 2
@@ -101,11 +110,10 @@ def check_2(runs: dict[str, RunFiles]) -> ClaimResult:
     dmin = float(df["dist_min"].min())
     t_hit = first_time_below(df["t"].to_numpy(), df["dist_min"].to_numpy(), 0.0)
     which = min(dcols, key=lambda c: df[c].min())[5:]
-    ok = dmin <= 0.0
-    return ClaimResult(
+    return _verdict(
         f"min true distance {dmin * 100:.2f} cm"
-        + (f"; first contact with '{which}' at {t_hit:.2f} s" if ok else "; no contact"),
-        _status(ok))
+        + (f"; first contact with '{which}' at {t_hit:.2f} s" if dmin <= 0 else ""),
+        {"contact": dmin <= 0.0})
 
 
 # ------------------------------------------------------------------ claim 3
@@ -115,17 +123,19 @@ def check_3(runs: dict[str, RunFiles]) -> ClaimResult:
     g1 = _groups(_first_contacts(df, 1))
     end1 = float(_cbf(df, 1).iloc[-1].min())
     end2 = float(_cbf(df, 2).iloc[-1].min())
-    ok = (len(g2) >= 2 and len(g1) >= 1 and g2[0][0] < g1[0][0] < g2[1][0] + 1e-9
-          and end1 <= 2 * NEAR_CONTACT and end2 <= 2 * NEAR_CONTACT)
+    order = len(g2) >= 2 and len(g1) >= 1 and g2[0][0] < g1[0][0] < g2[1][0] + 1e-9
     obstacle = ""
     if g2:
         i = int(np.searchsorted(df["t"].to_numpy(), g2[0][0]))
         dcols = [c for c in df.columns if c.startswith("dist_") and c != "dist_min"]
         obstacle = min(dcols, key=lambda c: df[c].iloc[i])[5:]
-    return ClaimResult(
+    return _verdict(
         f"ring 2: {_fmt_groups(g2)} (first group meets '{obstacle}'); ring 1: {_fmt_groups(g1)}; "
         f"CBF at the end: ring 1 {end1 * 100:.1f} cm, ring 2 {end2 * 100:.1f} cm "
-        "(our sensor numbering, see scene.py)", _status(ok))
+        "(our sensor numbering, see scene.py)",
+        {"order ring 2, ring 1, ring 2 (other side)": order,
+         "both rings near contact at the end": end1 <= 2 * NEAR_CONTACT
+         and end2 <= 2 * NEAR_CONTACT})
 
 
 # ------------------------------------------------------------------ claim 4
@@ -141,16 +151,18 @@ def check_4(runs: dict[str, RunFiles]) -> ClaimResult:
     u_end, u_peak = float(u_abs[-1]), float(np.nanmax(u_abs))
     e_end = _e_px(run)[-1]
     t_contact = min((t for t, i in _first_contacts(df, 2) if i in contact_end), default=np.nan)
-    ok = (stopped and len(active) >= 2 and set(active) <= set(contact_end)
-          and u_end <= U_SMALL * u_peak and e_end > RETURN_PX)
-    return ClaimResult(
+    return _verdict(
         f"stopped by the Lagrangian test: {stopped} at {df['t'].iloc[-1]:.2f} s with "
         f"||grad L|| = {df['grad_L0'].iloc[-1]:.4f}; ||e_4p|| = {e_end:.1f} px (local minimum); "
         f"ring-2 sensors in virtual contact at the end {contact_end} (from {t_contact:.2f} s), "
         f"kappa > 0 on {active} ({', '.join(f'{k2[i - 1]:.3f}' for i in active)}); "
         f"ring 1 near contact: {_fmt_groups(g1)}; max |u| at the end {u_end:.4f} rad/s "
         f"({u_end / u_peak:.1%} of its peak)",
-        _status(ok))
+        {"stopped by the Lagrangian test": stopped,
+         "local (not global) minimum": e_end > RETURN_PX,
+         ">= 2 ring-2 multipliers > 0, all on sensors in contact": len(active) >= 2
+         and set(active) <= set(contact_end),
+         f"u -> 0 (under {U_SMALL:.0%} of its peak)": u_end <= U_SMALL * u_peak})
 
 
 # ------------------------------------------------------------------ claim 5
@@ -172,14 +184,15 @@ def _oscillation(run: RunFiles) -> tuple[float, float]:
 def check_5(runs: dict[str, RunFiles]) -> ClaimResult:
     sc_f, hf_f = _oscillation(runs["case2"])
     sc_c, hf_c = _oscillation(runs["case2_coarse"])
-    ok = sc_c >= 2 * sc_f and sc_c >= 1.0 and hf_c > hf_f
     d_f = float(runs["case2"].trace["dist_min"].min())
     d_c = float(runs["case2_coarse"].trace["dist_min"].min())
-    return ClaimResult(
+    return _verdict(
         f"joint-velocity sign changes per s after ring-2 contact: model (6) {sc_c:.2f}, "
         f"model (5) {sc_f:.2f}; energy above {OSC_CUTOFF_HZ:g} Hz: (6) {hf_c:.1%}, "
         f"(5) {hf_f:.1%}; min true distance: (6) {d_c * 100:.2f} cm, (5) {d_f * 100:.2f} cm",
-        _status(ok))
+        {"(6) changes sign at least twice as often as (5), and >= 1/s": sc_c >= 2 * sc_f
+         and sc_c >= 1.0,
+         "(6) has more energy above the cut-off than (5)": hf_c > hf_f})
 
 
 # ------------------------------------------------------------------ claim 6
@@ -191,11 +204,13 @@ def check_6(runs: dict[str, RunFiles]) -> ClaimResult:
     k_end = float(_kappa_end(df, 2).max())
     e_end = _e_px(run)[-1]
     e0 = _e_px(run)[0]
-    ok = len(contact_end) >= 2 and k_end <= KAPPA_ZERO and sc < 1.0 and e_end <= 0.05 * e0
-    return ClaimResult(
+    return _verdict(
         f"ring-2 sensors at the threshold at the end {contact_end}; max final kappa "
         f"{k_end:.1e}; sign changes {sc:.2f}/s, energy above {OSC_CUTOFF_HZ:g} Hz {hf:.1%}; "
-        f"||e_4p|| {e0:.0f} -> {e_end:.1f} px (noise-free run)", _status(ok))
+        f"||e_4p|| {e0:.0f} -> {e_end:.1f} px (noise-free run)",
+        {"two sensors at the threshold": len(contact_end) >= 2,
+         "kappa = 0": k_end <= KAPPA_ZERO, "no oscillation (< 1 sign change/s)": sc < 1.0,
+         "visual task converges": e_end <= 0.05 * e0})
 
 
 # ------------------------------------------------------------------ claim 7
@@ -227,13 +242,14 @@ def check_7(runs: dict[str, RunFiles]) -> ClaimResult:
     cbf2 = float(_cbf(df, 2).min().min())
     cbf1 = float(_cbf(df, 1).min().min())
     dmin = float(df["dist_min"].min())
-    ok = (len(r2) == 4 and len(r1) == 4 and min(r2 + r1) >= HAND_EXCURSION_PX and returns
-          and dmin > 0)
-    return ClaimResult(
+    return _verdict(
         f"rise of ||e_4p|| per approach: ring 2 {', '.join(f'{r:.1f}' for r in r2)} px; ring 1 "
         f"{', '.join(f'{r:.1f}' for r in r1)} px; final ||e_4p|| {e[-1]:.1f} px; min CBF ring 2 "
         f"{cbf2 * 100:.1f} cm, ring 1 {cbf1 * 100:.1f} cm; min true distance {dmin * 100:.1f} cm",
-        _status(ok))
+        {"4 + 4 approaches": len(r2) == 4 and len(r1) == 4,
+         f"every approach raises ||e_4p|| by >= {HAND_EXCURSION_PX:g} px": bool(r2 + r1)
+         and min(r2 + r1) >= HAND_EXCURSION_PX,
+         f"returns under {RETURN_PX:g} px": returns, "no contact": dmin > 0})
 
 
 # ------------------------------------------------------------------ claim 8
@@ -243,9 +259,8 @@ def check_8(runs: dict[str, RunFiles]) -> ClaimResult:
     k_end = float(max(k1.max(), k2.max()))
     near = [f"r{r}s{i}" for r in (1, 2) for i in range(1, N + 1)
             if df[f"r{r}_cbf{i}"].iloc[-1] <= 2 * NEAR_CONTACT]
-    ok = k_end <= KAPPA_ZERO
-    return ClaimResult(f"max kappa* at the end {k_end:.1e} with sensors near contact {near}",
-                       _status(ok))
+    return _verdict(f"max kappa* at the end {k_end:.1e} with sensors near contact {near}",
+                    {f"kappa* <= {KAPPA_ZERO:g}": k_end <= KAPPA_ZERO})
 
 
 CLAIMS: tuple[Claim, ...] = (

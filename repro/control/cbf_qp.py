@@ -1,15 +1,15 @@
-"""Vision + proximity CBF-QP controller of thomas2024 (Sec. III).
+r"""Vision + proximity CBF-QP controller of thomas2024 (Sec. III).
 
 The cost is the 4-point IBVS task, the constraints one control-barrier-function
 inequality per proximity sensor plus the joint-velocity bounds:
 
 .. math::
 
-    \\dot q = \\arg\\min_u \\tfrac12 u^T G u + u^T c
-    \\quad \\text{s.t.}\\quad a_k^T u \\ge b_k,\\; u_{lower} \\le u \\le u_{upper}   (10)
+    \dot q = \arg\min_u \tfrac12 u^T G u + u^T c
+    \quad \text{s.t.}\quad a_k^T u \ge b_k,\; u_{lower} \le u \le u_{upper}   (10)
 
-    G = J_{4p}^T J_{4p} + \\mu I,\\quad c = \\lambda_{4p} J_{4p}^T e_{4p},\\quad
-    a_k^T = L_{\\delta_{ij}}\\, {}^jV_{N_j} J_{N_j},\\quad b_k = -\\lambda_j (\\delta_{ij} - \\delta^*_{ij})   (9)
+    G = J_{4p}^T J_{4p} + \mu I,\quad c = \lambda_{4p} J_{4p}^T e_{4p},\quad
+    a_k^T = L_{\delta_{ij}}\, {}^jV_{N_j} J_{N_j},\quad b_k = -\lambda_j (\delta_{ij} - \delta^*_{ij})   (9)
 
 Like pink's tasks and barriers, each piece returns plain arrays; the
 controller is a plain function that builds the QP, solves it and returns the
@@ -95,7 +95,7 @@ class CBFQPResult:
 
 
 class CBFQPController:
-    """Solves eq. (10) each control step, warm-started, with a stated fallback.
+    r"""Solves eq. (10) each control step, warm-started, with a stated fallback.
 
     The hard QP of eq. (10) can be infeasible: two opposite sensors both under
     their threshold ask for a_k^T u >= b_k > 0 and -a_k^T u >= b_k' > 0. The
