@@ -27,7 +27,9 @@ def rot_z(angle: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def make_T(R: np.ndarray | None = None, t: np.ndarray | tuple[float, ...] | None = None) -> np.ndarray:
+def make_T(
+    R: np.ndarray | None = None, t: np.ndarray | tuple[float, ...] | None = None
+) -> np.ndarray:
     """4x4 transform from a rotation (3x3, default identity) and translation [m]."""
     T = np.eye(4)
     if R is not None:

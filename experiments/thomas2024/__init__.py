@@ -3,10 +3,9 @@ Vision-based and Proximity-based Control", IEEE RA-L 9(10), 2024."""
 
 from __future__ import annotations
 
-from repro.runs.registry import Experiment, Paper
-
 from experiments.thomas2024 import config as _c
 from experiments.thomas2024.run import run
+from repro.runs.registry import Experiment, Paper
 
 
 def _figures(results_dir, figures_dir):  # type: ignore[no-untyped-def]

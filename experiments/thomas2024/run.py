@@ -16,6 +16,7 @@ import pybullet as p
 
 from experiments.thomas2024 import scene as sc
 from experiments.thomas2024.config import RING_MODELS, Thomas2024Config
+from repro.config import validate
 from repro.control.cbf_qp import (
     CBFQPController,
     Inequalities,
@@ -23,11 +24,10 @@ from repro.control.cbf_qp import (
     ibvs_objective,
 )
 from repro.control.proximity_features import NormalEstimator, ring_interaction_matrix
-from repro.config import validate
 from repro.errors import ConfigError, UnknownChoiceError
 from repro.geometry import inv_T
 from repro.runs.trace import TraceRecorder
-from repro.sensors.camera import Camera, move_dot_target, spawn_dot_target
+from repro.sensors.camera import Camera, spawn_dot_target
 from repro.sensors.proximity import ProximityRing, RingReading, exclude_from_rays
 from repro.sim.panda import PANDA_JOINTS, PANDA_LIMITS
 from repro.sim.robot import Robot, solve_ik

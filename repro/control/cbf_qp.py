@@ -9,7 +9,8 @@ inequality per proximity sensor plus the joint-velocity bounds:
     \quad \text{s.t.}\quad a_k^T u \ge b_k,\; u_{lower} \le u \le u_{upper}   (10)
 
     G = J_{4p}^T J_{4p} + \mu I,\quad c = \lambda_{4p} J_{4p}^T e_{4p},\quad
-    a_k^T = L_{\delta_{ij}}\, {}^jV_{N_j} J_{N_j},\quad b_k = -\lambda_j (\delta_{ij} - \delta^*_{ij})   (9)
+    a_k^T = L_{\delta_{ij}}\, {}^jV_{N_j} J_{N_j},\quad
+    b_k = -\lambda_j (\delta_{ij} - \delta^*_{ij})   (9)
 
 Like pink's tasks and barriers, each piece returns plain arrays; the
 controller is a plain function that builds the QP, solves it and returns the

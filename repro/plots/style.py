@@ -53,7 +53,7 @@ STYLE: dict[str, Any] = {
     "axes.linewidth": 0.6,
     "axes.spines.top": False,
     "axes.spines.right": False,
-    "axes.prop_cycle": mpl.cycler(color=list(PALETTE)),
+    "axes.prop_cycle": mpl.cycler(color=list(PALETTE)),  # type: ignore[attr-defined]
     "lines.linewidth": 1.2,
     "lines.markersize": 3,
     "xtick.major.width": 0.6,
@@ -72,7 +72,7 @@ def apply_style() -> None:
 
     Does not select a backend and never opens a window, so it is safe under Agg / headless.
     """
-    mpl.rcParams.update(STYLE)
+    mpl.rcParams.update(STYLE)  # type: ignore[arg-type]
 
 
 def save_figure(fig: Figure, figures_dir: Path, paper: str, name: str) -> list[Path]:

@@ -89,15 +89,16 @@ def build_panda_urdf(dest: Path, attachments: tuple[Attachment, ...] = ()) -> Pa
         if link.get("name") in _DROP_LINKS:
             robot.remove(link)
     for joint in list(robot.findall("joint")):
-        if joint.find("child").get("link") in _DROP_LINKS:  # type: ignore[union-attr]
+        child = joint.find("child")
+        if child is not None and child.get("link") in _DROP_LINKS:
             robot.remove(joint)
     for mesh in robot.iter("mesh"):
         fn = mesh.get("filename", "")
         mesh.set("filename", str(src_dir / fn.replace("package://", "")))
     for i, name in enumerate(PANDA_JOINTS):
-        joint = robot.find(f"joint[@name='{name}']")
-        assert joint is not None
-        lim = joint.find("limit")
+        arm_joint = robot.find(f"joint[@name='{name}']")
+        assert arm_joint is not None
+        lim = arm_joint.find("limit")
         assert lim is not None
         lim.set("lower", f"{PANDA_LIMITS.q_min[i]}")
         lim.set("upper", f"{PANDA_LIMITS.q_max[i]}")
@@ -118,10 +119,10 @@ def build_panda_urdf(dest: Path, attachments: tuple[Attachment, ...] = ()) -> Pa
             if a.collision:
                 col = ET.SubElement(link, "collision")
                 _geometry(col, a)
-        joint = ET.SubElement(robot, "joint", name=f"{a.name}_joint", type="fixed")
-        ET.SubElement(joint, "origin", **_origin(np.asarray(a.T_parent_child)))
-        ET.SubElement(joint, "parent", link=a.parent)
-        ET.SubElement(joint, "child", link=a.name)
+        fixed = ET.SubElement(robot, "joint", name=f"{a.name}_joint", type="fixed")
+        ET.SubElement(fixed, "origin", attrib=_origin(np.asarray(a.T_parent_child)))
+        ET.SubElement(fixed, "parent", link=a.parent)
+        ET.SubElement(fixed, "child", link=a.name)
     dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
     ET.indent(tree)

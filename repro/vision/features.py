@@ -131,7 +131,15 @@ def interaction_matrix_points(xy: np.ndarray, Z: np.ndarray) -> np.ndarray:
                           f"xy={xy[bad].tolist()}, Z={Z[bad].tolist()}")
     x, y = xy[:, 0], xy[:, 1]
     inv_z = 1.0 / Z
-    zero = np.zeros_like(x)
-    Lx = np.stack([-inv_z, zero, x * inv_z, x * y, -(1.0 + x * x), y], axis=1)
-    Ly = np.stack([zero, -inv_z, y * inv_z, 1.0 + y * y, -x * y, -x], axis=1)
-    return np.stack([Lx, Ly], axis=1).reshape(-1, 6)
+    L = np.zeros((x.size, 2, 6))
+    L[:, 0, 0] = -inv_z
+    L[:, 0, 2] = x * inv_z
+    L[:, 0, 3] = x * y
+    L[:, 0, 4] = -(1.0 + x * x)
+    L[:, 0, 5] = y
+    L[:, 1, 1] = -inv_z
+    L[:, 1, 2] = y * inv_z
+    L[:, 1, 3] = 1.0 + y * y
+    L[:, 1, 4] = -x * y
+    L[:, 1, 5] = -x
+    return L.reshape(-1, 6)
