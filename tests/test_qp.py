@@ -285,7 +285,7 @@ def test_random_cbf_qps_osqp_default_budget_never_wrong(cbf_problems) -> None:
         sol = qp.solve(p)
         statuses.append(sol.status)
         assert sol.status in ("solved", "max_iter")
-        assert sol.iterations <= 1000
+        assert sol.iterations <= 2 * 1000  # a warm attempt plus at most one cold retry
         if sol.status == "solved":
             np.testing.assert_allclose(sol.x, x_ref, atol=1e-6, rtol=0)
     assert statuses.count("solved") >= 0.95 * len(statuses)
@@ -364,7 +364,7 @@ def test_infeasible_is_reported_not_raised(solver: str) -> None:
     assert sol.status in ("infeasible", "max_iter")
     assert elapsed < 1.0
     if solver == "osqp":  # proxsuite's max_iter bounds outer iterations, not sol.iterations
-        assert sol.iterations <= 1000
+        assert sol.iterations <= 2 * 1000  # a warm attempt plus at most one cold retry
     assert np.all(np.isfinite(sol.x)) and np.all(np.isfinite(sol.z))
     assert np.all(np.isfinite(sol.z_box))
     # The controller carries on: the next feasible problem is solved again, from a cold

@@ -95,6 +95,10 @@ class CBFQPResult:
     solution: QPSolution
 
 
+#: Default iteration budgets of the hard QP per solver.
+DEFAULT_MAX_ITER = {"proxsuite": 200, "osqp": 10000}
+
+
 class CBFQPController:
     r"""Solves eq. (10) each control step, warm-started, with a stated fallback.
 
@@ -111,18 +115,22 @@ class CBFQPController:
     Args:
         n: joints; m: CBF rows.
         solver: "proxsuite" or "osqp".
-        max_iter: iteration budget of each solve (bounds the time an infeasible QP costs).
+        max_iter: iteration budget of each hard solve (bounds the time an infeasible QP
+            costs); None = the solver's default: 200 outer iterations for proxsuite,
+            10000 ADMM iterations for OSQP (its count is of much cheaper steps).
         slack_weight: rho. # ours: 1e4 makes a 1 mm/s violation cost like 0.1 rad/s of task error
     """
 
-    def __init__(self, n: int, m: int, solver: str = "proxsuite", max_iter: int = 200,
+    def __init__(self, n: int, m: int, solver: str = "proxsuite", max_iter: int | None = None,
                  slack_weight: float = 1e4) -> None:
         self.n, self.m = n, m
+        if max_iter is None:
+            max_iter = DEFAULT_MAX_ITER.get(solver, 200)
         self.hard = QPSolver(n, m, solver=solver, max_iter=max_iter)
-        # Always feasible, used rarely: cold-started, with a larger budget (OSQP needs
-        # ~2000 iterations on it because of the slack weight's scale).
-        self.relaxed = (QPSolver(n + m, m, solver=solver, max_iter=max(4000, 10 * max_iter),
-                                 warm_start=False) if m else None)
+        # Always feasible, used rarely: cold-started, with a larger budget (OSQP's ADMM
+        # needs ~16000 iterations on it for m = 36 because of the slack weight's scale).
+        self.relaxed = (QPSolver(n + m, m, solver=solver, max_iter=max(40000 if solver == "osqp"
+                                 else 2000, 10 * max_iter), warm_start=False) if m else None)
         self.slack_weight = slack_weight
 
     def step(self, objective: Objective, ineq: Inequalities, qd_max: np.ndarray) -> CBFQPResult:

@@ -302,6 +302,11 @@ class _ProxsuiteBackend:
         qp.settings.eps_rel = 0.0
         qp.settings.max_iter = self.max_iter
         qp.settings.verbose = False
+        # Without the duality-gap check a cold "solved" can keep a complementarity
+        # residual of ~4e-6 (u off by ~2e-6); with it, errors stay under 1e-8.
+        qp.settings.check_duality_gap = True
+        qp.settings.eps_duality_gap_abs = self.eps_abs
+        qp.settings.eps_duality_gap_rel = 0.0
         return qp
 
     def solve(self, d: _Dense) -> _RawResult:
@@ -516,9 +521,11 @@ class QPSolver:
             \text{dual\_sign} &\le \epsilon\, s_d, \qquad
             \text{complementarity} \le \epsilon\, s_d\, s_p.
 
-        Otherwise, if the solve was warm-started, it is repeated once cold (proxsuite
-        0.8.0 occasionally reports "solved" from a warm start with a wrong-sign multiplier
-        and a wrong ``x``); if the check still fails the status is ``"failed"``.
+        Otherwise -- and whenever a warm-started solve ends in anything but "solved" --
+        the solve is repeated once cold (proxsuite 0.8.0 occasionally reports "solved"
+        from a warm start with a wrong-sign multiplier and a wrong ``x``, and a warm start
+        from a dissimilar previous QP can stall at max_iter or be declared infeasible);
+        if the check still fails the status is ``"failed"``.
 
         Args:
             problem: shapes (n, n), (n,), (m, n), (m,), (m,), (n,), (n,).
@@ -540,7 +547,9 @@ class QPSolver:
         else:
             was_warm = self._backend.is_warm
             raw, status, kkt = self._attempt(d)
-            if raw.status == "solved" and status == "failed" and was_warm:
+            # A warm start can also stall a solvable problem (proxsuite: max_iter, or a
+            # false "infeasible") when the previous QP was very different: retry cold.
+            if status != "solved" and was_warm:
                 self.cold_retries += 1
                 self._backend.reset()
                 first_iterations = raw.iterations
