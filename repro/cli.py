@@ -307,7 +307,9 @@ def source_paths() -> list[Path]:
 def _cmd_report(args: argparse.Namespace) -> int:
     from repro.runs.report import render_report
 
-    result = render_report(args.results, args.figures, source_paths(), args.output)
+    root = Path(__file__).resolve().parent.parent
+    notes = {key: root / "experiments" / key / "discussion.md" for key in registry.load_papers()}
+    result = render_report(args.results, args.figures, source_paths(), args.output, notes=notes)
     print(f"wrote {result if result is not None else args.output}")
     return 0
 

@@ -14,7 +14,7 @@ import os
 import re
 import tokenize
 import urllib.parse
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -361,6 +361,7 @@ def render_report(
     *,
     papers: Sequence[str] | None = None,
     now: datetime | None = None,
+    notes: Mapping[str, Path] | None = None,
 ) -> Path:
     """Write REPORT.md at out_path from results_dir, figures_dir and the sources' ``# ours:``.
 
@@ -372,6 +373,8 @@ def render_report(
         out_path: the report to write (links are relative to its directory).
         papers: paper keys, in order; default: every paper found in results, figures, claims.
         now: generation time (default: now, UTC).
+        notes: per paper, a Markdown file of discussion (why a claim did or did not
+            reproduce, where the time goes) appended to that paper's section.
 
     Returns:
         out_path.
@@ -437,6 +440,9 @@ def render_report(
             bench=bench,
             ours=ours[owner == paper],
         )
+        note = (notes or {}).get(paper)
+        if note is not None and Path(note).is_file():
+            lines += ["### Discussion", "", Path(note).read_text(encoding="utf-8").strip(), ""]
 
     if bench is not None and "paper" not in bench.columns:
         lines += ["## Benchmarks", "", _bench_table(bench), ""]
