@@ -412,8 +412,9 @@ def test_report(monkeypatch, tmp_path):
     seen: dict[str, Any] = {}
     fake_report = types.ModuleType("repro.runs.report")
 
-    def render_report(results_dir, figures_dir, source_paths, output):
+    def render_report(results_dir, figures_dir, source_paths, output, notes=None):
         seen["args"] = (results_dir, figures_dir, list(source_paths), output)
+        seen["notes"] = notes
         return output
 
     fake_report.render_report = render_report
@@ -424,6 +425,8 @@ def test_report(monkeypatch, tmp_path):
     assert (results_dir, figures_dir, output) == (Path("r"), Path("f"), Path("REPORT.md"))
     assert Path(cli.__file__).resolve() in sources
     assert all(p.suffix == ".py" for p in sources)
+    # every registered paper may carry a discussion file next to its experiments
+    assert all(path.name == "discussion.md" for path in seen["notes"].values())
 
 
 def test_python_dash_m_repro_help():

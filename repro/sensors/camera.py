@@ -332,8 +332,10 @@ _MIN_VALUE = 40
 _HUE_TOLERANCE = 10
 
 
-def _check_colors(colors: Sequence[Sequence[int]]) -> list[int]:
-    """Validate dot colours (saturated, hues apart); return their OpenCV hues."""
+def _check_colors(colors: Sequence[Sequence[int]], hue_tolerance: int = _HUE_TOLERANCE
+                  ) -> list[int]:
+    """Validate dot colours (saturated, hues more than two tolerances apart); return their
+    OpenCV hues."""
     hues = []
     for color in colors:
         if len(color) != 3 or not all(0 <= int(c) <= 255 for c in color):
@@ -346,9 +348,9 @@ def _check_colors(colors: Sequence[Sequence[int]]) -> list[int]:
     for i in range(len(hues)):
         for j in range(i):
             d = abs(hues[i] - hues[j])
-            if min(d, 180 - d) <= 2 * _HUE_TOLERANCE:
+            if min(d, 180 - d) <= 2 * hue_tolerance:
                 raise ConfigError(f"dot colours {tuple(colors[j])} and {tuple(colors[i])} have "
-                                  f"hues closer than {4 * _HUE_TOLERANCE} deg")
+                                  f"hues closer than {4 * hue_tolerance} deg")
     return hues
 
 
@@ -362,7 +364,12 @@ class DotTarget:
         colors: one RGB colour (0-255) per dot, saturated and of distinct hues; the colour
             identifies the dot, which gives the image-to-model correspondence.
         dot_radius: radius of every dot [m].
-        plate_size: side lengths of the plate along x and y of the target frame [m].
+        plate_size: side lengths of the plate along x and y of the target frame [m]; None for
+            no plate: the dots then need not be coplanar (each disc faces +z of the target
+            frame at its own height, e.g. on the faces of a part built by the caller).
+        hue_tolerance: half-width of the hue window of detection, OpenCV units (2 deg
+            each); dot hues must be more than two tolerances apart. 10 allows 6 colours,
+            8 allows 10 (36 deg apart).
 
     Note: under perspective the centroid of the image of a tilted disc (what
     :func:`detect_dots` measures) is not the image of its centre (what :func:`project_points`
@@ -374,23 +381,27 @@ class DotTarget:
     points_target: np.ndarray
     colors: tuple[tuple[int, int, int], ...]
     dot_radius: float = 0.012
-    plate_size: tuple[float, float] = (0.20, 0.20)
+    plate_size: tuple[float, float] | None = (0.20, 0.20)
+    hue_tolerance: int = _HUE_TOLERANCE
 
     def __post_init__(self) -> None:
         pts = _as_points(self.points_target, 3, "points_target").copy()
-        if not np.all(np.isfinite(pts)) or np.any(np.abs(pts[:, 2]) > 1e-9):
-            raise ConfigError("points_target must be finite with z = 0 (planar target)")
+        if not np.all(np.isfinite(pts)):
+            raise ConfigError("points_target must be finite")
+        if self.plate_size is not None and np.any(np.abs(pts[:, 2]) > 1e-9):
+            raise ConfigError("points_target must have z = 0 on a plate target "
+                              "(plate_size=None allows non-coplanar dots)")
         pts.setflags(write=False)
         colors = tuple(tuple(int(c) for c in color) for color in self.colors)
         if len(colors) != pts.shape[0]:
             raise ConfigError(f"need one colour per dot: {pts.shape[0]} dots, "
                               f"{len(colors)} colours")
-        if self.dot_radius <= 0 or min(self.plate_size) <= 0:
+        if self.dot_radius <= 0 or (self.plate_size is not None and min(self.plate_size) <= 0):
             raise ConfigError(f"dot_radius and plate_size must be > 0, got {self.dot_radius}, "
                               f"{self.plate_size}")
         object.__setattr__(self, "points_target", pts)
         object.__setattr__(self, "colors", colors)
-        _check_colors(colors)
+        _check_colors(colors, self.hue_tolerance)
 
     @property
     def n_points(self) -> int:
@@ -419,7 +430,8 @@ def _dot_target_poses(target: DotTarget, T_world_target: np.ndarray
     """World (position, xyzw quaternion) of the plate and of each disc body."""
     T = _as_pose(T_world_target, "T_world_target")
     quat = _quat_xyzw(T[:3, :3])
-    centres = [np.array([0.0, 0.0, -PLATE_GAP - PLATE_THICKNESS / 2.0])]
+    centres = ([np.array([0.0, 0.0, -PLATE_GAP - PLATE_THICKNESS / 2.0])]
+               if target.plate_size is not None else [])
     centres += [pt + np.array([0.0, 0.0, -DISC_THICKNESS / 2.0]) for pt in target.points_target]
     return [((T[:3, :3] @ c + T[:3, 3]).tolist(), quat) for c in centres]
 
@@ -444,12 +456,14 @@ def spawn_dot_target(client_id: int, target: DotTarget, T_world_target: np.ndarr
         T_world_target: 4x4 pose of the target frame in the world frame [m].
 
     Returns:
-        Body ids: ``[plate, dot_0, ..., dot_{N-1}]``.
+        Body ids: ``[plate, dot_0, ..., dot_{N-1}]`` (no plate id when ``plate_size`` is None).
     """
-    sx, sy = target.plate_size
-    shapes = [p.createVisualShape(
-        p.GEOM_BOX, halfExtents=[sx / 2.0, sy / 2.0, PLATE_THICKNESS / 2.0],
-        rgbaColor=[1.0, 1.0, 1.0, 1.0], physicsClientId=client_id)]
+    shapes = []
+    if target.plate_size is not None:
+        sx, sy = target.plate_size
+        shapes.append(p.createVisualShape(
+            p.GEOM_BOX, halfExtents=[sx / 2.0, sy / 2.0, PLATE_THICKNESS / 2.0],
+            rgbaColor=[1.0, 1.0, 1.0, 1.0], physicsClientId=client_id))
     for color in target.colors:
         shapes.append(p.createVisualShape(
             p.GEOM_CYLINDER, radius=target.dot_radius, length=DISC_THICKNESS,
@@ -473,9 +487,9 @@ def move_dot_target(client_id: int, body_ids: Sequence[int], target: DotTarget,
         p.resetBasePositionAndOrientation(body, pos, quat, physicsClientId=client_id)
 
 
-def _hue_mask(hsv: np.ndarray, hue: int) -> np.ndarray:
-    """uint8 mask of vivid pixels whose hue is within the tolerance of ``hue`` (OpenCV units)."""
-    lo, hi = hue - _HUE_TOLERANCE, hue + _HUE_TOLERANCE
+def _hue_mask(hsv: np.ndarray, hue: int, tolerance: int = _HUE_TOLERANCE) -> np.ndarray:
+    """uint8 mask of vivid pixels whose hue is within ``tolerance`` of ``hue`` (OpenCV units)."""
+    lo, hi = hue - tolerance, hue + tolerance
     ranges = [(max(lo, 0), min(hi, 179))]
     if lo < 0:  # the hue circle wraps at 180 (red)
         ranges.append((180 + lo, 179))
@@ -491,7 +505,8 @@ def _hue_mask(hsv: np.ndarray, hue: int) -> np.ndarray:
 
 
 def detect_dots(rgb: np.ndarray, colors: Sequence[Sequence[int]],
-                min_area_px: int = 6) -> tuple[np.ndarray, np.ndarray]:
+                min_area_px: int = 6, hue_tolerance: int = _HUE_TOLERANCE
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Find the centroid of each coloured dot in an RGB image.
 
     Per colour: HSV mask (hue within +-20 deg of the colour's hue, saturation >= 100/255,
@@ -518,12 +533,12 @@ def detect_dots(rgb: np.ndarray, colors: Sequence[Sequence[int]],
     rgb = np.asarray(rgb)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise ConfigError(f"rgb must be an (H, W, 3) uint8 image, got {rgb.shape} {rgb.dtype}")
-    hues = _check_colors(colors)
+    hues = _check_colors(colors, hue_tolerance)
     hsv = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2HSV)
     uv = np.full((len(hues), 2), np.nan)
     found = np.zeros(len(hues), dtype=bool)
     for i, hue in enumerate(hues):
-        mask = _hue_mask(hsv, hue)
+        mask = _hue_mask(hsv, hue, hue_tolerance)
         n, _, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
         if n < 2:
             continue
@@ -587,5 +602,5 @@ class Camera:
             uv = np.where(found[:, None], uv_exact, np.nan)
             return uv, found, Z
         rgb = render_rgb(client_id, self.intrinsics, T_world_camera)
-        uv, found = detect_dots(rgb, target.colors)
+        uv, found = detect_dots(rgb, target.colors, hue_tolerance=target.hue_tolerance)
         return uv, found, Z

@@ -44,7 +44,7 @@ from repro.errors import ConfigError
 from repro.sim.robot import JointLimits
 
 CRS_JOINTS = tuple(f"crs_joint{i}" for i in range(1, 7))
-#: Moving links, in chain order (crs_link0 is the fixed base).
+#: Links of the arm in chain order, from the fixed base crs_link0 to the flange link.
 CRS_LINKS = tuple(f"crs_link{i}" for i in range(0, 7))
 
 # Published CRS-A465 figures (public datasheet values; see the asset README).
@@ -57,8 +57,8 @@ LINK_LENGTHS = (0.330, 0.305, 0.330, 0.076)
 #: Joint axes in the base frame at q = 0 (and in each joint's own frame).
 JOINT_AXES = ((0, 0, 1), (0, -1, 0), (0, -1, 0), (0, 0, 1), (0, -1, 0), (0, 0, 1))
 # ours: torque limits [N m]; CRS does not publish joint torques. Tens of N m for the arm
-# joints (>= ~1.5x the static gravity load of the outstretched arm with gripper and camera),
-# a few N m for the wrist.
+# joints (about 2x / 3x the static gravity load at joints 2 / 3 of the outstretched arm with
+# gripper and camera, room for a ~2 kg payload), a few N m for the wrist.
 TAU_MAX = (60.0, 80.0, 40.0, 8.0, 8.0, 4.0)
 
 CRS_LIMITS = JointLimits(

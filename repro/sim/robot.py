@@ -74,7 +74,10 @@ class Robot:
         pos, quat = pose_to_pb(self.T_world_base)
         self.body = p.loadURDF(
             str(self.urdf_path), pos, quat, useFixedBase=True,
-            flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=self.client,
+            # Implicit cylinders: exact cylinder collision shapes (not convex hulls), so that
+            # PyBullet's distances agree with python-fcl's on the same primitives.
+            flags=p.URDF_USE_INERTIA_FROM_FILE | p.URDF_USE_IMPLICIT_CYLINDER,
+            physicsClientId=self.client,
         )
         # PyBullet indices of joints and links (a link has the index of its parent joint).
         self._pb_joint: dict[str, int] = {}
@@ -225,8 +228,11 @@ class Robot:
         """T_world_link (4x4) of the URDF link frame as PyBullet has it now."""
         idx = self.pb_link_index(link)
         if idx == -1:
+            # PyBullet reports the base's inertial (centre-of-mass) frame; undo the URDF's
+            # inertial offset to get the link frame.
             pos, quat = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
-            return pb_to_pose(pos, quat)
+            info = p.getDynamicsInfo(self.body, -1, physicsClientId=self.client)
+            return pb_to_pose(pos, quat) @ np.linalg.inv(pb_to_pose(info[3], info[4]))
         st = p.getLinkState(self.body, idx, computeForwardKinematics=True,
                             physicsClientId=self.client)
         return pb_to_pose(st[4], st[5])
