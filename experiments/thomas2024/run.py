@@ -290,6 +290,19 @@ class Thomas2024Controller:
         self.cV_e = twist_transform(inv_T(sc.CAMERA_PARENT[1] @ _optical_offset()))
         self.ring_V = {name: twist_transform(inv_T(T)) for name, (_, T) in sc.RING_PARENTS.items()}
         self.dirs = [r.spec.directions() for r in setup.rings]
+        # Constant per-step data, looked up once: ring parent links, the coarse model's
+        # interaction matrices (eq. (6) does not depend on the reading), pixel -> normalised.
+        self._ring_parents = [sc.RING_PARENTS[r.spec.name][0] for r in setup.rings]
+        self._ring_L: list[np.ndarray | None] = []
+        for k, ring in enumerate(setup.rings):
+            L = None
+            if config.proximity and config.ring_models[k] == "coarse":
+                L = ring_interaction_matrix(self.dirs[k], np.zeros(ring.spec.n_sensors),
+                                            ring.spec.radius, "coarse")
+                L.flags.writeable = False
+            self._ring_L.append(L)
+        self._uv0 = np.array([sc.INTRINSICS.u0, sc.INTRINSICS.v0])
+        self._f_uv = np.array([sc.INTRINSICS.fu, sc.INTRINSICS.fv])
 
     def read_rings(self, q: np.ndarray) -> list[RingReading]:
         """Ray-cast every ring at configuration ``q`` and update the normal estimators."""
@@ -306,35 +319,47 @@ class Thomas2024Controller:
         """One control step: thomas2024 eqs. (7)-(10)."""
         setup, cfg, robot = self.setup, self.config, self.setup.robot
         n, m = self.n, self.m
-        if not np.all(found):
+        if not np.asarray(found).all():
             return StepOutput(np.zeros(n), "no_features", np.full(8, np.nan), np.zeros(m),
                               float("nan"), 0, 0.0, 0.0, "")
-        x = sc.INTRINSICS.to_normalized(uv)
+        x = (np.asarray(uv, dtype=float) - self._uv0) / self._f_uv  # INTRINSICS.to_normalized
         e_4p = (x - setup.s_star).ravel()
-        A_rows, b_rows = [], []
+        jacobians: dict[str, np.ndarray] = {}  # J_N (local) per link, each computed once
+
+        def jacobian(link: str) -> np.ndarray:
+            J = jacobians.get(link)
+            if J is None:
+                J = jacobians[link] = robot.frame_jacobian(link, q, "local")
+            return J
+
+        A = np.empty((m, n))
+        b = np.empty(m)
         if cfg.proximity:
+            row = 0
             for k, (ring, reading) in enumerate(zip(setup.rings, readings, strict=True)):
                 name = ring.spec.name
-                model = cfg.ring_models[k]
-                normals = setup.estimators[k].normals() if model != "coarse" else None
-                L = ring_interaction_matrix(self.dirs[k], reading.delta, ring.spec.radius,
-                                            model, normals)
-                parent = sc.RING_PARENTS[name][0]
-                J_S = self.ring_V[name] @ robot.frame_jacobian(parent, q, "local")  # jV_Nj J_Nj
+                L = self._ring_L[k]
+                if L is None:
+                    model = cfg.ring_models[k]
+                    normals = setup.estimators[k].normals() if model != "coarse" else None
+                    L = ring_interaction_matrix(self.dirs[k], reading.delta, ring.spec.radius,
+                                                model, normals)
+                J_S = self.ring_V[name] @ jacobian(self._ring_parents[k])  # jV_Nj J_Nj
                 ineq = cbf_inequalities(L, J_S, reading.delta, cfg.thresholds[k],
                                         cfg.ring_gains[k])
-                A_rows.append(ineq.A)
-                b_rows.append(ineq.b)
+                A[row:row + ineq.A.shape[0]] = ineq.A
+                b[row:row + ineq.A.shape[0]] = ineq.b
+                row += ineq.A.shape[0]
+            if row != m:
+                raise ValueError(f"the rings gave {row} CBF rows, expected {m}")
         Z = _depths(setup, uv, Z_exact)
         L_x = interaction_matrix_points(x, Z)
-        J_4p = L_x @ self.cV_e @ robot.frame_jacobian("panda_link8", q, "local")  # eq. (7)
+        J_4p = L_x @ self.cV_e @ jacobian("panda_link8")  # eq. (7)
         obj = ibvs_objective(J_4p, e_4p, cfg.lambda_4p, cfg.mu)
-        ineq = (Inequalities(np.vstack(A_rows), np.concatenate(b_rows)) if m
-                else Inequalities(np.zeros((0, n)), np.zeros(0)))
-        res = self.qp.step(obj, ineq, self.qd_max)
+        res = self.qp.step(obj, Inequalities(A, b), self.qd_max)
         return StepOutput(res.u, res.status, e_4p, res.kappa, res.grad_L0,
                           res.solution.iterations, res.solution.solve_time_s,
-                          float(np.max(res.slack)) if m else 0.0, res.qp_status)
+                          float(res.slack.max()) if m else 0.0, res.qp_status)
 
 
 def _loop(setup: Setup, config: Thomas2024Config, rec: TraceRecorder,

@@ -19,6 +19,7 @@ command with the QP's dual solution (for the stopping test, Sec. III-C).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -51,7 +52,9 @@ def ibvs_objective(J_4p: np.ndarray, e_4p: np.ndarray, lambda_4p: float, mu: flo
         mu: regularisation (thomas2024: 0.01).
     """
     n = J_4p.shape[1]
-    return Objective(J_4p.T @ J_4p + mu * np.eye(n), lambda_4p * J_4p.T @ e_4p)
+    G = J_4p.T @ J_4p
+    G.flat[:: n + 1] += mu  # + mu I (adding 0 off the diagonal changes nothing)
+    return Objective(G, lambda_4p * J_4p.T @ e_4p)
 
 
 def cbf_inequalities(L_delta: np.ndarray, J_S: np.ndarray, delta: np.ndarray,
@@ -132,18 +135,21 @@ class CBFQPController:
         self.relaxed = (QPSolver(n + m, m, solver=solver, max_iter=max(40000 if solver == "osqp"
                                  else 2000, 10 * max_iter), warm_start=False) if m else None)
         self.slack_weight = slack_weight
+        self._u_inf = np.full(m, np.inf)
+        self._u_inf.flags.writeable = False
 
     def step(self, objective: Objective, ineq: Inequalities, qd_max: np.ndarray) -> CBFQPResult:
         """Solve eq. (10) with box bounds -qd_max <= u <= qd_max [rad/s]."""
         n, m = self.n, self.m
         problem = QPProblem(
-            H=objective.H, g=objective.g, C=ineq.A, l=ineq.b, u=np.full(m, np.inf),
+            H=objective.H, g=objective.g, C=ineq.A, l=ineq.b, u=self._u_inf,
             lb=-qd_max, ub=qd_max,
         )
         sol = self.hard.solve(problem)
-        if sol.status == "solved" and np.all(np.isfinite(sol.x)):
+        if sol.status == "solved" and np.isfinite(sol.x).all():
             kappa = lower_multipliers(sol)
-            grad_L0 = float(np.linalg.norm(objective.g - ineq.A.T @ kappa))  # eq. (14), u = 0
+            r = objective.g - ineq.A.T @ kappa
+            grad_L0 = math.sqrt(r @ r)  # eq. (14), u = 0; = np.linalg.norm(r)
             return CBFQPResult(sol.x, "solved", sol.status, kappa, grad_L0, np.zeros(m), sol)
         if self.relaxed is not None:
             H = np.zeros((n + m, n + m))

@@ -15,7 +15,6 @@ towards the sensor (so that n_T = -n_S for a surface facing the sensor).
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +44,10 @@ def L_delta_coarse(n_S: np.ndarray) -> np.ndarray:
     return np.concatenate([-n_S, np.zeros(3)])
 
 
+_YZX = np.array([1, 2, 0])
+_ZXY = np.array([2, 0, 1])
+
+
 def ring_interaction_matrix(
     n_S: np.ndarray,
     delta: np.ndarray,
@@ -71,12 +74,15 @@ def ring_interaction_matrix(
     L[:, :3] = -n_S  # eq. (6)
     if model == "coarse" or normals is None:
         return L
-    ok = np.all(np.isfinite(normals), axis=1)
-    if not np.any(ok):
+    ok = np.isfinite(normals).all(axis=1)
+    if not ok.any():
         return L
     n_T = normals[ok]
     m_T = (delta[ok] + r)[:, None] * n_S[ok]
-    rows = np.hstack([n_T, np.cross(m_T, n_T)])  # eq. (5)
+    rows = np.empty((n_T.shape[0], 6))  # eq. (5): [n_T, m_T x n_T]
+    rows[:, :3] = n_T
+    # m_T x n_T with the products and differences of np.cross, without its overhead.
+    rows[:, 3:] = m_T[:, _YZX] * n_T[:, _ZXY] - m_T[:, _ZXY] * n_T[:, _YZX]
     if model == "exact":
         rows *= (-1.0 / np.einsum("ij,ij->i", n_T, n_S[ok]))[:, None]  # beta, eq. (2)
     L[ok] = rows
@@ -139,15 +145,25 @@ class NormalEstimator:
         self.n_S = n_S
         self.radius = radius
         self.config = config or NormalEstimatorConfig()
-        self._past: deque[tuple[np.ndarray, np.ndarray, np.ndarray]] = deque(
-            maxlen=self.config.history
-        )
+        # The last ``history`` past steps, oldest first, stacked: ring poses (K, 4, 4),
+        # points in their ring frame (K, m, 3), detection flags (K, m); None before any.
+        self._past: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._current: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def update(self, T_world_ring: np.ndarray, delta: np.ndarray, detected: np.ndarray) -> None:
         """Store this step's detections: points (delta + r) n_S in the ring frame."""
-        if self._current is not None:
-            self._past.append(self._current)
+        if self._current is not None and self.config.history > 0:
+            if self._past is None:
+                self._past = (self._current[0][None], self._current[1][None],
+                              self._current[2][None])
+            elif len(self._past[0]) < self.config.history:
+                self._past = (np.concatenate((self._past[0], self._current[0][None])),
+                              np.concatenate((self._past[1], self._current[1][None])),
+                              np.concatenate((self._past[2], self._current[2][None])))
+            else:  # full: drop the oldest (these arrays are private, shifted in place)
+                for buf, new in zip(self._past, self._current, strict=True):
+                    buf[:-1] = buf[1:]
+                    buf[-1] = new
         pts = (delta + self.radius)[:, None] * self.n_S
         self._current = (T_world_ring.copy(), pts, detected.copy())
 
@@ -169,21 +185,22 @@ class NormalEstimator:
         if not np.any(det_now):
             return out
         T_now_inv = np.linalg.inv(T_now)
-        pts = [pts_now]
-        det = [det_now]
-        for T_then, p_then, d_then in self._past:
-            T_rel = T_now_inv @ T_then
-            pts.append(p_then @ T_rel[:3, :3].T + T_rel[:3, 3])
-            det.append(d_then)
-        P = np.stack(pts)  # (K, m, 3), K = 1 + history; index 0 = now
-        D = np.stack(det)  # (K, m)
+        if self._past is None:
+            P, D = pts_now[None], det_now[None]
+        else:
+            T_then, p_then, d_then = self._past
+            T_rel = T_now_inv @ T_then  # (K - 1, 4, 4): tp_T_tq
+            p_rel = p_then @ T_rel[:, :3, :3].transpose(0, 2, 1) + T_rel[:, None, :3, 3]
+            P = np.concatenate((pts_now[None], p_rel))  # (K, m, 3), K = 1 + history; 0 = now
+            D = np.concatenate((det_now[None], d_then))  # (K, m)
         sensors = np.flatnonzero(det_now)
         offsets = np.arange(-cfg.neighbours, cfg.neighbours + 1)
         nbr = (sensors[:, None] + offsets[None, :]) % m  # (s, w)
         cand = P[:, nbr]  # (K, s, w, 3)
         valid = D[:, nbr]  # (K, s, w)
         p_i = pts_now[sensors]  # (s, 3)
-        dist = np.linalg.norm(cand - p_i[None, :, None, :], axis=-1)
+        diff = cand - p_i[None, :, None, :]
+        dist = np.sqrt(np.add.reduce(diff * diff, axis=-1))  # = np.linalg.norm(diff, axis=-1)
         keep = valid & (dist <= cfg.max_separation)
         keep[1:] &= dist[1:] >= cfg.min_separation  # past points near the current one dropped
         w = keep.astype(float)

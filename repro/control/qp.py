@@ -119,7 +119,12 @@ class QPSolution(NamedTuple):
 
 
 class _Dense(NamedTuple):
-    """A QPProblem with every optional part filled in (infinite bounds kept as inf)."""
+    """A QPProblem with every optional part filled in (infinite bounds kept as inf).
+
+    ``bounds`` stacks the bounds of ``v = [C x; x]`` as ``[l; lb; u; ub]`` (so ``bounds[:k]``
+    are the lower and ``bounds[k:]`` the upper bounds of ``v``, ``k = m + n``) and
+    ``not_finite`` marks its non-finite entries; both serve the KKT check (:func:`_kkt_full`).
+    """
 
     H: np.ndarray
     g: np.ndarray
@@ -128,6 +133,8 @@ class _Dense(NamedTuple):
     u: np.ndarray
     lb: np.ndarray
     ub: np.ndarray
+    bounds: np.ndarray
+    not_finite: np.ndarray | None  # None when every bound is finite
 
 
 class _RawResult(NamedTuple):
@@ -140,6 +147,15 @@ class _RawResult(NamedTuple):
     iterations: int
 
 
+def _vec(v: np.ndarray | None, size: int, fill: float, name: str) -> np.ndarray:
+    if v is None:
+        return np.full(size, fill)
+    out = np.asarray(v, dtype=float).reshape(-1)
+    if out.shape != (size,):
+        raise QPDimensionError(f"{name} has shape {out.shape}, expected ({size},)")
+    return out
+
+
 def _as_dense(problem: QPProblem, n: int | None = None, m: int | None = None) -> _Dense:
     """Fill the optional parts of ``problem`` and check every shape.
 
@@ -149,11 +165,11 @@ def _as_dense(problem: QPProblem, n: int | None = None, m: int | None = None) ->
     """
     H = np.asarray(problem.H, dtype=float)
     if H.ndim == 2 and H.shape[0] == H.shape[1]:
-        H = 0.5 * (H + H.T)  # OSQP reads only the upper triangle, proxsuite all of H
+        H = H + H.T  # OSQP reads only the upper triangle, proxsuite all of H
+        H *= 0.5
     g = np.asarray(problem.g, dtype=float).reshape(-1)
-    n_p = H.shape[0] if H.ndim == 2 else -1
     if n is None:
-        n = n_p
+        n = H.shape[0] if H.ndim == 2 else -1
     if H.shape != (n, n):
         raise QPDimensionError(f"H has shape {H.shape}, expected ({n}, {n})")
     if g.shape != (n,):
@@ -168,45 +184,88 @@ def _as_dense(problem: QPProblem, n: int | None = None, m: int | None = None) ->
         m = C.shape[0]
     if C.shape != (m, n):
         raise QPDimensionError(f"C has shape {C.shape}, expected ({m}, {n})")
+    l = _vec(problem.l, m, -np.inf, "l")
+    u = _vec(problem.u, m, np.inf, "u")
+    lb = _vec(problem.lb, n, -np.inf, "lb")
+    ub = _vec(problem.ub, n, np.inf, "ub")
+    bounds = np.concatenate((l, lb, u, ub))
+    finite = np.isfinite(bounds)
+    return _Dense(H, g, C, l, u, lb, ub, bounds, None if finite.all() else ~finite)
 
-    def vec(v: np.ndarray | None, size: int, fill: float, name: str) -> np.ndarray:
-        if v is None:
-            return np.full(size, fill)
-        out = np.asarray(v, dtype=float).reshape(-1)
-        if out.shape != (size,):
-            raise QPDimensionError(f"{name} has shape {out.shape}, expected ({size},)")
-        return out
 
-    return _Dense(
-        H=H,
-        g=g,
-        C=C,
-        l=vec(problem.l, m, -np.inf, "l"),
-        u=vec(problem.u, m, np.inf, "u"),
-        lb=vec(problem.lb, n, -np.inf, "lb"),
-        ub=vec(problem.ub, n, np.inf, "ub"),
+class _KKT(NamedTuple):
+    """KKT residuals (see :func:`kkt_residuals`) and the scales of :meth:`QPSolver._kkt_ok`."""
+
+    stationarity: float
+    primal_infeasibility: float
+    complementarity: float
+    dual_sign: float
+    s_d: float  # 1 + max(|H x|, |g|, |C^T z|, |z_box|)
+    s_p: float  # 1 + max(|C x|, |x|)
+
+    def as_dict(self) -> dict[str, float]:
+        return {"stationarity": self.stationarity,
+                "primal_infeasibility": self.primal_infeasibility,
+                "complementarity": self.complementarity, "dual_sign": self.dual_sign}
+
+
+def _kkt_full(d: _Dense, x: np.ndarray, z: np.ndarray, z_box: np.ndarray) -> _KKT:
+    """KKT residuals of ``(x, z, z_box)`` and their scales, rows and box stacked.
+
+    With ``v = [C x; x]``, ``y = [z; z_box]`` and the stacked bounds ``lo <= v <= hi``
+    (``d.bounds = [lo; hi]``), the lower and upper sides are handled together on doubled
+    vectors: ``E = [lo - v; v - hi]`` (bound violations; primal infeasibility
+    ``max(0, max E)``), ``Y = [max(-y, 0); max(y, 0)]`` (multipliers of the lower / upper
+    bounds), complementarity ``max(Y |E|)`` with ``|E|`` taken as 0 on infinite bounds, dual
+    sign ``max(Y [bound infinite])`` (a multiplier on an infinite bound). The six infinity
+    norms are the row maxima of one zero-padded (6, .) array (all entries but ``E``'s are
+    >= 0, and ``E`` is clamped at 0 anyway), i.e. a single NumPy reduction.
+    """
+    C = d.C
+    Cx = C @ x
+    Hx = d.H @ x
+    CTz = C.T @ z
+    n = x.shape[0]
+    k = Cx.shape[0] + n
+    k2 = 2 * k
+    W = np.zeros((6, max(k2, 4 * n)))
+    stat = Hx + d.g  # H x + g + C^T z + z_box, summed in this order
+    stat += CTz
+    stat += z_box
+    np.abs(stat, out=W[0, :n])
+    vv = np.concatenate((Cx, x, Cx, x))
+    E = W[1, :k2]
+    np.subtract(vv, d.bounds, out=E)  # [v - lo; v - hi]
+    np.negative(E[:k], out=E[:k])  # [lo - v; v - hi]
+    Y = np.concatenate((z, z_box, z, z_box))
+    np.negative(Y[:k], out=Y[:k])
+    np.maximum(Y, 0.0, out=Y)
+    A = np.abs(E)
+    inf = d.not_finite
+    if inf is not None:
+        A[inf] = 0.0  # infinite bounds never bind
+        np.multiply(Y, inf, out=W[3, :k2])
+    else:
+        np.multiply(Y, 0.0, out=W[3, :k2])  # 0 (NaN for a NaN multiplier)
+    np.multiply(A, Y, out=W[2, :k2])
+    S = W[4, : 4 * n]
+    np.concatenate((Hx, d.g, CTz, z_box), out=S)
+    np.abs(S, out=S)
+    np.abs(vv[:k], out=W[5, :k])
+    stat_max, violation, compl, dual_sign, s_d, s_p = W.max(axis=1).tolist()
+    return _KKT(
+        stationarity=stat_max,
+        primal_infeasibility=max(violation, 0.0) + 0.0,
+        complementarity=compl,
+        dual_sign=dual_sign,
+        s_d=1.0 + s_d,
+        s_p=1.0 + s_p,
     )
 
 
 def _kkt(d: _Dense, x: np.ndarray, z: np.ndarray, z_box: np.ndarray) -> dict[str, float]:
     """KKT residuals of ``(x, z, z_box)``, rows and box stacked (see :func:`kkt_residuals`)."""
-    v = np.concatenate([d.C @ x, x])
-    y = np.concatenate([z, z_box])
-    lo = np.concatenate([d.l, d.lb])
-    hi = np.concatenate([d.u, d.ub])
-    stat = d.H @ x + d.g + d.C.T @ z + z_box
-    y_lo = np.maximum(-y, 0.0)  # multipliers of active lower bounds
-    y_hi = np.maximum(y, 0.0)  # multipliers of active upper bounds
-    lo_fin, hi_fin = np.isfinite(lo), np.isfinite(hi)
-    # Infinite bounds never bind; a multiplier on one is a dual-sign error, not a gap.
-    gap_lo = y_lo * np.abs(np.where(lo_fin, v - lo, 0.0))
-    gap_hi = y_hi * np.abs(np.where(hi_fin, hi - v, 0.0))
-    return {
-        "stationarity": float(np.max(np.abs(stat))),
-        "primal_infeasibility": float(max(np.max(np.maximum(lo - v, v - hi)), 0.0)),
-        "complementarity": float(np.max(np.maximum(gap_lo, gap_hi))),
-        "dual_sign": float(np.max(np.maximum(y_lo * ~lo_fin, y_hi * ~hi_fin))),
-    }
+    return _kkt_full(d, x, z, z_box).as_dict()
 
 
 def kkt_residuals(problem: QPProblem, sol: QPSolution) -> dict[str, float]:
@@ -262,7 +321,9 @@ def _finite_or_zero(v: Any, size: int) -> np.ndarray:
     out = np.array(v, dtype=float).reshape(-1)
     if out.shape != (size,):
         return np.zeros(size)
-    out[~np.isfinite(out)] = 0.0
+    finite = np.isfinite(out)
+    if not finite.all():
+        out[~finite] = 0.0
     return out
 
 
@@ -319,7 +380,8 @@ class _ProxsuiteBackend:
             self._qp.update(d.H, d.g, None, None, d.C, d.l, d.u, d.lb, d.ub)
         self._qp.solve()
         res = self._qp.results
-        st = res.info.status
+        info = res.info
+        st = info.status
         if st == pq.PROXQP_SOLVED:
             status: QPStatus = "solved"
         elif st in (pq.PROXQP_PRIMAL_INFEASIBLE, pq.PROXQP_DUAL_INFEASIBLE):
@@ -328,13 +390,20 @@ class _ProxsuiteBackend:
             status = "max_iter"
         else:  # PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE, PROXQP_NOT_RUN
             status = "failed"
-        z_all = np.asarray(res.z, dtype=float).reshape(-1)
+        # res.x and res.z are views of proxsuite's buffers: copy them.
+        x = np.array(res.x, dtype=float)
+        z_all = np.array(res.z, dtype=float)
+        m = self.m
+        if (x.shape == (self.n,) and z_all.shape == (m + self.n,)
+                and np.isfinite(x).all() and np.isfinite(z_all).all()):
+            return _RawResult(x, z_all[:m], z_all[m:], status, int(info.iter))
+        z_all = z_all.reshape(-1)
         return _RawResult(
-            x=_finite_or_zero(res.x, self.n),
-            z=_finite_or_zero(z_all[: self.m], self.m),
-            z_box=_finite_or_zero(z_all[self.m :], self.n),
+            x=_finite_or_zero(x, self.n),
+            z=_finite_or_zero(z_all[:m], m),
+            z_box=_finite_or_zero(z_all[m:], self.n),
             status=status,
-            iterations=int(res.info.iter),
+            iterations=int(info.iter),
         )
 
 
@@ -538,12 +607,12 @@ class QPSolver:
         """
         t0 = time.perf_counter()
         d = _as_dense(problem, self.n, self.m)
-        if not all(np.all(np.isfinite(a)) for a in (d.H, d.g, d.C)) or any(
-            np.any(np.isnan(a)) for a in (d.l, d.u, d.lb, d.ub)
-        ):
+        k = self.m + self.n
+        if not np.isfinite(np.concatenate((d.H.ravel(), d.g, d.C.ravel()))).all():
             raw, status, kkt = self._trivial(d, "failed")
-        elif np.any(d.l > d.u) or np.any(d.lb > d.ub):
-            raw, status, kkt = self._trivial(d, "infeasible")
+        elif not (d.bounds[:k] <= d.bounds[k:]).all():  # some l > u, or a NaN bound
+            raw, status, kkt = self._trivial(
+                d, "failed" if np.isnan(d.bounds).any() else "infeasible")
         else:
             was_warm = self._backend.is_warm
             raw, status, kkt = self._attempt(d)
@@ -564,38 +633,33 @@ class QPSolver:
             status=status,
             iterations=raw.iterations,
             solve_time_s=time.perf_counter() - t0,
-            primal_residual=kkt["primal_infeasibility"],
-            dual_residual=kkt["stationarity"],
+            primal_residual=kkt.primal_infeasibility,
+            dual_residual=kkt.stationarity,
         )
 
-    def _attempt(self, d: _Dense) -> tuple[_RawResult, QPStatus, dict[str, float]]:
+    def _attempt(self, d: _Dense) -> tuple[_RawResult, QPStatus, _KKT]:
         """One backend solve, its KKT residuals and its status after the KKT check."""
         raw = self._backend.solve(d)
-        kkt = _kkt(d, raw.x, raw.z, raw.z_box)
+        kkt = _kkt_full(d, raw.x, raw.z, raw.z_box)
         status = raw.status
-        if status == "solved" and not self._kkt_ok(d, raw, kkt):
+        if status == "solved" and not self._kkt_ok(kkt):
             status = "failed"
         return raw, status, kkt
 
-    def _trivial(
-        self, d: _Dense, status: QPStatus
-    ) -> tuple[_RawResult, QPStatus, dict[str, float]]:
+    def _trivial(self, d: _Dense, status: QPStatus) -> tuple[_RawResult, QPStatus, _KKT]:
         """A zero result for data the backends are not given (non-finite, or ``l > u``)."""
         raw = _RawResult(np.zeros(self.n), np.zeros(self.m), np.zeros(self.n), status, 0)
         with np.errstate(invalid="ignore"):
-            kkt = _kkt(d, raw.x, raw.z, raw.z_box)
+            kkt = _kkt_full(d, raw.x, raw.z, raw.z_box)
         return raw, status, kkt
 
-    def _kkt_ok(self, d: _Dense, raw: _RawResult, kkt: dict[str, float]) -> bool:
-        def nrm(v: np.ndarray) -> float:
-            return float(np.max(np.abs(v))) if v.size else 0.0
-
-        s_d = 1.0 + max(nrm(d.H @ raw.x), nrm(d.g), nrm(d.C.T @ raw.z), nrm(raw.z_box))
-        s_p = 1.0 + max(nrm(d.C @ raw.x), nrm(raw.x))
+    def _kkt_ok(self, kkt: _KKT) -> bool:
+        """The acceptance test of :meth:`solve` (scales ``s_d``, ``s_p`` from :func:`_kkt_full`)."""
         eps = self.kkt_tol
+        s_d, s_p = kkt.s_d, kkt.s_p
         return (
-            kkt["stationarity"] <= eps * s_d
-            and kkt["primal_infeasibility"] <= eps * s_p
-            and kkt["dual_sign"] <= eps * s_d
-            and kkt["complementarity"] <= eps * s_d * s_p
+            kkt.stationarity <= eps * s_d
+            and kkt.primal_infeasibility <= eps * s_p
+            and kkt.dual_sign <= eps * s_d
+            and kkt.complementarity <= eps * s_d * s_p
         )

@@ -132,19 +132,20 @@ def _origin(elem: ET.Element | None) -> np.ndarray:
     return T
 
 
-def parse_urdf(urdf_path: Path) -> tuple[dict[str, list[Primitive]], dict[str, UrdfJoint]]:
+def parse_urdf(urdf_path: Path, skip_links: Sequence[str] = ()
+               ) -> tuple[dict[str, list[Primitive]], dict[str, UrdfJoint]]:
     """Collision primitives per link and the joints of a URDF.
 
-    Links without ``<collision>`` get an empty list. A mesh (or any geometry but box,
-    cylinder, sphere) raises :class:`UnknownChoiceError`: skipping it silently would make
-    the collision check unsafe.
+    Links without ``<collision>`` and links in ``skip_links`` get an empty list. A mesh
+    (or any geometry but box, cylinder, sphere) on another link raises
+    :class:`UnknownChoiceError`: ignoring it silently would make the collision check unsafe.
     """
     root = ET.parse(urdf_path).getroot()
     links: dict[str, list[Primitive]] = {}
     for link in root.findall("link"):
         name = link.get("name", "")
         prims: list[Primitive] = []
-        for col in link.findall("collision"):
+        for col in [] if name in skip_links else link.findall("collision"):
             geom = col.find("geometry")
             shape = None if geom is None or len(geom) == 0 else geom[0]
             if shape is None:
@@ -278,7 +279,7 @@ class CollisionModel:
         self.T_world_base = np.eye(4) if T_world_base is None else np.asarray(T_world_base, float)
         self.margin = float(margin)
         self.n = len(self.joint_names)
-        links, joints = parse_urdf(self.urdf_path)
+        links, joints = parse_urdf(self.urdf_path, skip_links)
         self._joints = joints
         for link in skip_links:
             if link not in links:
@@ -295,24 +296,30 @@ class CollisionModel:
             if jt.name not in self.joint_names:
                 raise ConfigError(f"movable joint {jt.name!r} is not in joint_names "
                                   f"{self.joint_names}")
-        skip = set(skip_links)
         self.primitives: tuple[Primitive, ...] = tuple(
-            prim for name, prims in links.items() if name not in skip for prim in prims)
+            prim for prims in links.values() for prim in prims)
         # Children of each link (URDF tree).
         self._child_joints: dict[str, list[UrdfJoint]] = {name: [] for name in links}
         for jt in joints.values():
             self._child_joints[jt.parent].append(jt)
 
-        # pinocchio: control order -> q index; one BODY frame per primitive.
+        # pinocchio: each primitive gets its own frame (placement T_link_geom), so that one
+        # framesForwardKinematics call poses them all in C++; control order -> q index.
         self.model = pin.buildModelFromUrdf(str(self.urdf_path))
+        self._frame = []
+        for k, prim in enumerate(self.primitives):
+            body = self.model.frames[self.model.getFrameId(prim.link, pin.FrameType.BODY)]
+            self._frame.append(self.model.addFrame(pin.Frame(
+                f"dcc_geom_{k}_{prim.link}", body.parentJoint,
+                body.placement * pin.SE3(prim.T_link_geom), pin.FrameType.OP_FRAME)))
         self.data = self.model.createData()
+        self._M_world_base = (None if np.allclose(self.T_world_base, np.eye(4))
+                              else pin.SE3(self.T_world_base))
         if self.model.nq != self.n:
             raise ConfigError(f"pinocchio model has nq={self.model.nq}, joint_names has {self.n}")
         self._q_idx = np.array([self.model.joints[self.model.getJointId(n)].idx_q
                                 for n in self.joint_names])
         self._pin_joint = [self.model.getJointId(n) for n in self.joint_names]
-        self._frame = [self.model.getFrameId(prim.link, pin.FrameType.BODY)
-                       for prim in self.primitives]
 
         # fcl objects: robot primitives (moved by setTransform) and static obstacles.
         self._robot_objs = [fcl.CollisionObject(prim.fcl_geometry(), fcl.Transform())
@@ -345,9 +352,10 @@ class CollisionModel:
         if self._posed_q is not None and np.array_equal(q, self._posed_q):
             return
         pin.framesForwardKinematics(self.model, self.data, self._pin_q(q))
-        for obj, prim, fid in zip(self._robot_objs, self.primitives, self._frame, strict=True):
-            T = self.T_world_base @ self.data.oMf[fid].homogeneous @ prim.T_link_geom
-            obj.setTransform(_fcl_transform(T))
+        base = self._M_world_base
+        for obj, fid in zip(self._robot_objs, self._frame, strict=True):
+            M = self.data.oMf[fid] if base is None else base * self.data.oMf[fid]
+            obj.setTransform(fcl.Transform(M.rotation, M.translation))
         self._robot_mgr.update()
         self._posed_q = q.copy()
 
@@ -355,8 +363,7 @@ class CollisionModel:
         """T_world_geom of every primitive in :attr:`primitives` at ``q``."""
         pin.framesForwardKinematics(self.model, self.data, self._pin_q(q))
         self._posed_q = None  # data changed under the fcl objects' feet: re-pose next time
-        return [self.T_world_base @ self.data.oMf[fid].homogeneous @ prim.T_link_geom
-                for prim, fid in zip(self.primitives, self._frame, strict=True)]
+        return [self.T_world_base @ self.data.oMf[fid].homogeneous for fid in self._frame]
 
     # --------------------------------------------------------------- distances
     def _penetration(self) -> float:
@@ -509,8 +516,7 @@ class CollisionModel:
         oMj_inv = self.data.oMi[self._pin_joint[j]].inverse().homogeneous
         links = set(self.subtree_links(j))
         axis = self._joints[self.joint_names[j]].axis
-        vals = [axis_radius(prim, oMj_inv @ self.data.oMf[fid].homogeneous @ prim.T_link_geom,
-                            axis, bound=False)
+        vals = [axis_radius(prim, oMj_inv @ self.data.oMf[fid].homogeneous, axis, bound=False)
                 for prim, fid in zip(self.primitives, self._frame, strict=True)
                 if prim.link in links]
         return max(vals, default=0.0)

@@ -21,6 +21,11 @@ from repro.errors import ConfigError, UnknownChoiceError
 from repro.sim.world import World, pb_to_pose, pose_to_pb
 
 JACOBIAN_FRAMES = ("local", "world", "local_world_aligned")
+_PIN_REFERENCE = {
+    "local": pin.ReferenceFrame.LOCAL,
+    "world": pin.ReferenceFrame.WORLD,
+    "local_world_aligned": pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+}
 
 
 @dataclass(frozen=True)
@@ -104,7 +109,11 @@ class Robot:
                 f"pinocchio model has nq={self.model.nq} but {self.n} controlled joints; "
                 "every non-fixed URDF joint must be controlled"
             )
-        self._pin_q_cache: np.ndarray | None = None
+        # Kinematics cache: the bytes of the q last given to pinocchio (bit-identical q,
+        # identical results; a bytes comparison is much cheaper than np.array_equal).
+        self._pin_q_key: bytes | None = None
+        self._pin_q_identity = bool(np.array_equal(self._pin_q_idx, np.arange(self.model.nq)))
+        self._frame_ids: dict[str, int] = {}
         self.velocity_mode()
 
     # ------------------------------------------------------------------ state
@@ -153,6 +162,22 @@ class Robot:
             physicsClientId=self.client,
         )
 
+    def set_position_command(self, q_ref: np.ndarray, qd_ref: np.ndarray,
+                             position_gain: float = 0.2, velocity_gain: float = 1.0) -> None:
+        """Track a joint reference with PyBullet's joint PD (position control) [rad, rad/s].
+
+        The gains are PyBullet's dimensionless ones; the motor force is limited to tau_max.
+        Called every physics step, this is the inner "PID" loop tracking an interpolated
+        reference (chan2011 Sec. V-A5).
+        """
+        p.setJointMotorControlArray(
+            self.body, self.pb_joints, p.POSITION_CONTROL,
+            targetPositions=np.asarray(q_ref, dtype=float).tolist(),
+            targetVelocities=np.asarray(qd_ref, dtype=float).tolist(),
+            positionGains=[position_gain] * self.n, velocityGains=[velocity_gain] * self.n,
+            forces=list(self.limits.tau_max), physicsClientId=self.client,
+        )
+
     def torque_mode(self) -> None:
         """Release the velocity motors so that :meth:`set_torque_command` acts alone."""
         p.setJointMotorControlArray(
@@ -178,13 +203,24 @@ class Robot:
 
     def _update(self, q: np.ndarray) -> None:
         q = np.asarray(q, dtype=float)
-        if self._pin_q_cache is not None and np.array_equal(q, self._pin_q_cache):
+        key = q.tobytes()
+        if key == self._pin_q_key:
             return
-        qp = self._pin_q(q)
+        if self._pin_q_identity and q.shape == (self.model.nq,):
+            qp = np.ascontiguousarray(q)
+        else:
+            qp = self._pin_q(q)
         pin.forwardKinematics(self.model, self.data, qp)
         pin.computeJointJacobians(self.model, self.data, qp)
         pin.updateFramePlacements(self.model, self.data)
-        self._pin_q_cache = q.copy()
+        self._pin_q_key = key
+
+    def _frame_id(self, frame: str) -> int:
+        """:meth:`frame_id`, memoised."""
+        fid = self._frame_ids.get(frame)
+        if fid is None:
+            fid = self._frame_ids[frame] = self.frame_id(frame)
+        return fid
 
     def frame_id(self, frame: str) -> int:
         """pinocchio frame id of a URDF link name."""
@@ -195,7 +231,7 @@ class Robot:
     def frame_pose(self, frame: str, q: np.ndarray) -> np.ndarray:
         """T_world_frame (4x4) at joint positions ``q`` [rad] (pinocchio)."""
         self._update(q)
-        return self.T_world_base @ self.data.oMf[self.frame_id(frame)].homogeneous
+        return self.T_world_base @ self.data.oMf[self._frame_id(frame)].homogeneous
 
     def frame_jacobian(self, frame: str, q: np.ndarray, reference: str = "local") -> np.ndarray:
         """Geometric Jacobian (6 x n) of ``frame``: twist (v, w) = J qd.
@@ -210,13 +246,10 @@ class Robot:
         if reference not in JACOBIAN_FRAMES:
             raise UnknownChoiceError("Jacobian reference", reference, JACOBIAN_FRAMES)
         self._update(q)
-        rf = {
-            "local": pin.ReferenceFrame.LOCAL,
-            "world": pin.ReferenceFrame.WORLD,
-            "local_world_aligned": pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
-        }[reference]
-        J = pin.getFrameJacobian(self.model, self.data, self.frame_id(frame), rf)
-        J = J[:, self._pin_q_idx]
+        J = pin.getFrameJacobian(self.model, self.data, self._frame_id(frame),
+                                 _PIN_REFERENCE[reference])  # a new (6, nq) array
+        if not self._pin_q_identity:
+            J = J[:, self._pin_q_idx]
         if reference != "local":
             R = self.T_world_base[:3, :3]
             if reference == "world" and not np.allclose(self.T_world_base[:3, 3], 0.0):

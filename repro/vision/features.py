@@ -18,6 +18,8 @@ of a point; the paper uses twist transformation matrices (e.g. cV_e) of the form
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from repro.errors import SensorError
@@ -105,6 +107,25 @@ def interaction_matrix_point(x: float, y: float, Z: float) -> np.ndarray:
     return interaction_matrix_points(np.array([[x, y]], dtype=float), np.array([Z], dtype=float))
 
 
+_SMALL_N = 16
+"""Up to this many points, :func:`interaction_matrix_points` works on Python floats (the
+same IEEE operations as the vectorised code, without NumPy's per-call overhead)."""
+
+
+def _interaction_matrix_small(xy: np.ndarray, Z: np.ndarray) -> np.ndarray | None:
+    """The (2N, 6) matrix of :func:`interaction_matrix_points` built from Python floats, or
+    None when a point is invalid (the caller then raises its error)."""
+    inf = math.inf
+    rows: list[tuple[float, ...]] = []
+    for (x, y), z in zip(xy.tolist(), Z.tolist(), strict=True):
+        if not (0.0 < z < inf and -inf < x < inf and -inf < y < inf):
+            return None
+        inv_z = 1.0 / z
+        rows.append((-inv_z, 0.0, x * inv_z, x * y, -(1.0 + x * x), y))
+        rows.append((0.0, -inv_z, y * inv_z, 1.0 + y * y, -x * y, -x))
+    return np.array(rows, dtype=float).reshape(-1, 6)
+
+
 def interaction_matrix_points(xy: np.ndarray, Z: np.ndarray) -> np.ndarray:
     """(2N, 6) stacked interaction matrices of N image points, rows ``x1, y1, x2, y2, ...``.
 
@@ -124,6 +145,10 @@ def interaction_matrix_points(xy: np.ndarray, Z: np.ndarray) -> np.ndarray:
     Z = np.asarray(Z, dtype=float).reshape(-1)
     if xy.ndim != 2 or xy.shape[1] != 2 or Z.shape[0] != xy.shape[0]:
         raise ValueError(f"need xy (N, 2) and Z (N,), got {xy.shape} and {Z.shape}")
+    if xy.shape[0] <= _SMALL_N:
+        L = _interaction_matrix_small(xy, Z)
+        if L is not None:
+            return L
     bad = ~(np.isfinite(Z) & (Z > 0) & np.all(np.isfinite(xy), axis=1))
     if np.any(bad):
         idx = np.flatnonzero(bad).tolist()

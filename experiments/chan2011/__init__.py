@@ -1,0 +1,49 @@
+"""chan2011: Chan, Leonard, Croft, Little, "Collision-Free Visual Servoing of an Eye-in-Hand
+Manipulator via Constraint-Aware Planning and Control", ACC 2011."""
+
+from __future__ import annotations
+
+from experiments.chan2011 import config as _c
+from experiments.chan2011.dcc_audit import DCCAuditConfig
+from experiments.chan2011.dcc_audit import run as _audit
+from experiments.chan2011.run import run
+from repro.runs.registry import Experiment, Paper
+
+
+def _figures(results_dir, figures_dir):  # type: ignore[no-untyped-def]
+    from experiments.chan2011.figures import make_figures
+
+    return make_figures(results_dir, figures_dir)
+
+
+def _claims():  # type: ignore[no-untyped-def]
+    from experiments.chan2011.claims import CLAIMS
+
+    return CLAIMS
+
+
+def _bench(results_dir):  # type: ignore[no-untyped-def]
+    from experiments.chan2011.bench import bench
+
+    return bench(results_dir)
+
+
+EXPERIMENTS = Paper(
+    key="chan2011",
+    experiments=(
+        Experiment("simulation", "chan2011", "Sec. III: NMPC, Np = 5, dt = 10 ms (Figs. 3-6)",
+                   _c.SimulationConfig, run),
+        Experiment("experiment", "chan2011", "Sec. V: conrod among four obstacles, Np = 10, "
+                   "dt = 0.1 s, 5 % speeds, DCC (Figs. 12-13)", _c.ExperimentConfig, run),
+        Experiment("ibvs", "chan2011", "Baseline: classical IBVS on the simulation task",
+                   _c.IBVSConfig, run),
+        Experiment("ibvs_saturated", "chan2011", "Baseline: IBVS with a joint-velocity "
+                   "saturator on the simulation task", _c.IBVSSaturatedConfig, run),
+        Experiment("dcc_audit", "chan2011", "DCC conservativeness: random segments certified "
+                   "by eq. (20) + bisection, verified by dense fcl checks", DCCAuditConfig,
+                   _audit),
+    ),
+    figures=_figures,
+    claims=_claims,
+    bench=_bench,
+)

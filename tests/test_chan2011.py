@@ -1,0 +1,169 @@
+"""chan2011: short runs against committed references, the camera and target, the image
+Jacobian through the CRS-A465 kinematics, the inner-loop interpolation, claim checks."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pinocchio as pin
+import pytest
+
+from experiments.chan2011 import EXPERIMENTS
+from experiments.chan2011 import claims as cl
+from experiments.chan2011 import scene as sc
+from experiments.chan2011.dcc_audit import DCCAuditConfig
+from repro.control.interpolation import quintic
+from repro.control.nmpc import CameraModel, NMPCConfig, VisualNMPC
+from repro.runs.trace import RunFiles, load_run
+from repro.sensors.camera import (
+    project_points,
+    render_rgb,
+    spawn_dot_target,
+)
+from repro.sim.casadi_kinematics import frame_pose_casadi
+from repro.sim.crs_a465 import CRS_JOINTS, CRS_LIMITS, T_FLANGE_CAMERA, crs_urdf_path
+from repro.sim.world import World
+
+REF_DIR = Path(__file__).parent / "reference" / "chan2011"
+SHORT = {"simulation": 0.3, "experiment": 2.0, "ibvs": 0.3, "ibvs_saturated": 0.3}
+TIMING_COLUMNS = ("solve_s",)
+
+
+def short_config(name: str) -> object:
+    exp = next(e for e in EXPERIMENTS.experiments if e.name == name)
+    if name == "dcc_audit":
+        return DCCAuditConfig(n_segments=12)
+    return dataclasses.replace(exp.config_cls(), duration=SHORT[name], camera_mode="exact",
+                               snapshots=0)
+
+
+def short_run(name: str, out: Path) -> RunFiles:
+    exp = next(e for e in EXPERIMENTS.experiments if e.name == name)
+    return load_run(exp.run(short_config(name), out))
+
+
+@pytest.mark.parametrize("name", [e.name for e in EXPERIMENTS.experiments])
+def test_short_run_matches_reference(name: str, tmp_path: Path) -> None:
+    got = short_run(name, tmp_path / name)
+    assert got.manifest["status"] == "completed"
+    ref = pd.read_csv(REF_DIR / f"{name}.csv")
+    df = got.trace
+    assert len(df) == len(ref)
+    compared = [c for c in ref.columns if ref[c].dtype.kind == "f" and c not in TIMING_COLUMNS]
+    assert len(compared) >= 10
+    for c in compared:
+        tol = 1e-3 if c.startswith("p") or c.startswith("e_") else 1e-5
+        np.testing.assert_allclose(df[c].to_numpy(float), ref[c].to_numpy(float), atol=tol,
+                                   rtol=1e-6, err_msg=f"{name}: column {c}")
+
+
+def test_nmpc_commands_respect_every_bound(tmp_path: Path) -> None:
+    got = short_run("experiment", tmp_path / "exp")
+    df = got.trace
+    qd_max = np.asarray(got.scene["joint_limits"]["qd_max_used"])
+    u = df[[f"u{i}" for i in range(1, 7)]].to_numpy(float)
+    assert np.all(np.abs(u) <= qd_max + 1e-6)
+    q = df[[f"q{i}" for i in range(1, 7)]].to_numpy(float)
+    assert np.all(q >= np.asarray(CRS_LIMITS.q_min)) and np.all(q <= np.asarray(CRS_LIMITS.q_max))
+    tab = sc.TABLE_I
+    pu = df[[f"p{j}_u" for j in range(1, 11)]].to_numpy(float)
+    pv = df[[f"p{j}_v" for j in range(1, 11)]].to_numpy(float)
+    assert pu.min() >= tab["u_min"] and pu.max() <= tab["u_max"]
+    assert pv.min() >= tab["v_min"] and pv.max() <= tab["v_max"]
+    assert (df["status"] == "Solve_Succeeded").all()
+
+
+def test_ten_colour_conrod_detected_at_its_image_centroids() -> None:
+    """The 10 dots (hues 36 deg apart) are found, each where its disc's image centroid is."""
+    setting = sc.SETTINGS["simulation"]
+    with World() as w:
+        spawn_dot_target(w.client, sc.CONROD, setting.T_object_actual)
+        # a camera 0.35 m above the conrod, looking down at it
+        T = setting.T_object_actual @ np.array(
+            [[1, 0, 0, -0.07], [0, -1, 0, 0], [0, 0, -1, 0.35], [0, 0, 0, 1.0]])
+        from repro.sensors.camera import detect_dots
+
+        rgb = render_rgb(w.client, sc.TRUE_INTRINSICS, T)
+        uv, found = detect_dots(rgb, sc.CONROD.colors, hue_tolerance=sc.CONROD.hue_tolerance)
+        assert found.all()
+        centres, _ = project_points(sc.TRUE_INTRINSICS, T,
+                                    sc.CONROD.points_world(setting.T_object_actual))
+        assert np.abs(uv - centres).max() < 1.5  # perspective bias of 4 mm discs
+
+
+def test_image_jacobian_through_crs_kinematics_matches_finite_differences() -> None:
+    model = pin.buildModelFromUrdf(str(crs_urdf_path()))
+    fk = frame_pose_casadi(model, "flange", CRS_JOINTS, T_frame_child=T_FLANGE_CAMERA)
+    nmpc = VisualNMPC(fk, CameraModel(**sc.TABLE_I), 10, CRS_LIMITS.q_min, CRS_LIMITS.q_max,
+                      np.ones(6), NMPCConfig())
+    st = sc.SETTINGS["simulation"]
+    rng = np.random.default_rng(3)
+    for q in [np.deg2rad(st.q0_deg)] + [rng.uniform(-1, 1, 6) for _ in range(3)]:
+        J = nmpc.image_jacobian(q, st.T_object_estimate, sc.CONROD_POINTS)
+        h = 1e-6
+        fd = np.column_stack([
+            (nmpc.predict_pixels(q + h * e, st.T_object_estimate, sc.CONROD_POINTS)
+             - nmpc.predict_pixels(q - h * e, st.T_object_estimate, sc.CONROD_POINTS)) / (2 * h)
+            for e in np.eye(6)])
+        np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-3)
+
+
+def test_predicted_pixels_match_exact_projection_with_table_i_camera() -> None:
+    model = pin.buildModelFromUrdf(str(crs_urdf_path()))
+    fk = frame_pose_casadi(model, "flange", CRS_JOINTS, T_frame_child=T_FLANGE_CAMERA)
+    cam = CameraModel(**sc.TABLE_I)
+    nmpc = VisualNMPC(fk, cam, 10, CRS_LIMITS.q_min, CRS_LIMITS.q_max, np.ones(6))
+    st = sc.SETTINGS["simulation"]
+    q = np.deg2rad(st.q0_deg)
+    from repro.sensors.camera import Intrinsics
+    from repro.sim.robot import Robot
+
+    with World() as w:
+        robot = Robot(w, crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
+        T = robot.frame_pose("flange", q) @ T_FLANGE_CAMERA
+    K = cam.matrix()
+    intr = Intrinsics(1024, 768, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
+    uv, _ = project_points(intr, T, sc.CONROD.points_world(st.T_object_estimate))
+    np.testing.assert_allclose(nmpc.predict_pixels(q, st.T_object_estimate, sc.CONROD_POINTS),
+                               uv.ravel(), atol=1e-8)
+
+
+def test_quintic_meets_its_boundary_conditions() -> None:
+    q0, v0, q1, v1, T = np.array([0.1, -1]), np.array([0.5, 0]), np.array([0.3, 2]), \
+        np.array([-0.2, 1]), 0.1
+    qa, va = quintic(q0, v0, q1, v1, T, 0.0)
+    qb, vb = quintic(q0, v0, q1, v1, T, T)
+    np.testing.assert_allclose(qa, q0)
+    np.testing.assert_allclose(va, v0)
+    np.testing.assert_allclose(qb, q1, atol=1e-12)
+    np.testing.assert_allclose(vb, v1, atol=1e-9)
+    h = 1e-8  # zero acceleration at both ends
+    assert np.all(np.abs((quintic(q0, v0, q1, v1, T, h)[1] - v0) / h) < 1e-2)
+
+
+def _fake_run(u_scale: float, lost: bool) -> RunFiles:
+    n = 50
+    status = ["no_features" if lost and i == n - 1 else "x" for i in range(n)]
+    data = {"t": np.arange(n) * 0.01, "e_rms_px": np.linspace(100, 1, n), "status": status}
+    for i in range(1, 7):
+        data[f"q{i}"] = np.zeros(n)
+        data[f"u{i}"] = np.full(n, u_scale)
+    for j in range(1, 11):
+        data[f"p{j}_u"] = np.full(n, 500.0)
+        data[f"p{j}_v"] = np.full(n, 400.0)
+    scene = {"joint_limits": {"q_min": [-1] * 6, "q_max": [1] * 6, "qd_max_used": [1] * 6},
+             "camera_controller": {"table_I": sc.TABLE_I}}
+    return RunFiles(pd.DataFrame(data), pd.DataFrame(), {}, json.loads(json.dumps(scene)))
+
+
+def test_claim4_detects_broken_constraints() -> None:
+    ok = _fake_run(0.5, lost=False)
+    assert cl._broken(ok) == []
+    assert any("velocity" in b for b in cl._broken(_fake_run(1.5, lost=False)))
+    assert any("field of view" in b for b in cl._broken(_fake_run(0.5, lost=True)))
+    res = cl.check_4({"ibvs": _fake_run(1.5, False), "ibvs_saturated": ok})
+    assert res.status == "not_reproduced" and "saturator breaks a constraint" in res.measured
