@@ -35,6 +35,14 @@ def _limits(run: RunFiles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             np.asarray(lim["qd_max_used"], float))
 
 
+def _lost(run: RunFiles) -> str:
+    ev = run.events
+    if len(ev) and (ev["kind"] == "feature_lost").any():
+        row = ev[ev["kind"] == "feature_lost"].iloc[0]
+        return f"; at {float(row['t']):.1f} s {row['detail']}"
+    return ""
+
+
 def _fov(run: RunFiles) -> tuple[bool, float]:
     """(all points inside Table I's bounds at every step, worst margin [px])."""
     tab = run.scene["camera_controller"]["table_I"]
@@ -94,7 +102,8 @@ def check_3(runs: dict[str, RunFiles]) -> ClaimResult:
     parts, checks = [], {}
     for name in ("simulation", "experiment"):
         ok, worst = _fov(runs[name])
-        parts.append(f"{name}: worst margin to the image border {worst:.1f} px")
+        parts.append(f"{name}: worst margin to the image border {worst:.1f} px"
+                     f"{_lost(runs[name])}")
         checks[f"{name}: every point inside the image at every step"] = ok
     return _verdict("; ".join(parts), checks)
 

@@ -65,7 +65,7 @@ class ExperimentConfig(Chan2011Config):
     W_weight: float = param(10000.0, range=(0.0, None), help="W = 10000 I (Sec. V-A6)")
     velocity_fraction: float = param(0.05, range=(0.001, 1.0),
                                      help="5 % of the maximum speeds (Sec. V-A2)")
-    duration: float = param(60.0, unit="s", range=(0.01, 600.0), help="run time")  # ours
+    duration: float = param(90.0, unit="s", range=(0.01, 600.0), help="run time")  # ours: 5 % speeds are slow
     dcc: bool = param(True, help="dynamic collision checking (Sec. IV)")
     inner_loop: str = param("pd", choices=("kinematic", "pd"),
                             help="PD tracking of the quintic references at 1 kHz (Sec. V-A5)")

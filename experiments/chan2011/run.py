@@ -221,6 +221,7 @@ def run(config: Chan2011Config, out_dir: Path) -> Path:
     check_config(config)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(out_dir / "frames", ignore_errors=True)  # no stale snapshots
     with TraceRecorder(out_dir, experiment=out_dir.name.split("__")[0], paper="chan2011",
                        config=config, seed=config.seed) as rec:
         setup = build(config, out_dir)
@@ -288,9 +289,14 @@ def _loop(setup: Setup, config: Chan2011Config, rec: TraceRecorder,
         box_halfwidth = float("nan")
         qdot = np.zeros(n)
         if not found.all():
-            rec.event(t, k, "feature_lost", f"points {np.flatnonzero(~found).tolist()} left "
-                      "the image: field of view broken; run stopped")
-            reason = "feature lost (field of view)"
+            uv_e, Z_e = project_points(sc.TRUE_INTRINSICS, T_wc,
+                                       sc.CONROD.points_world(s.T_object_actual))
+            inside = sc.TRUE_INTRINSICS.in_image(uv_e) & (Z_e > 0)
+            lost = np.flatnonzero(~found).tolist()
+            why = ("occluded (inside the image)" if np.all(inside[~found])
+                   else "outside the image")
+            rec.event(t, k, "feature_lost", f"points {lost} not found: {why}; run stopped")
+            reason = f"feature lost ({why})"
             status = "no_features"
         elif setup.nmpc is not None:
             d_k = setup.nmpc.disturbance(p_k, q, s.T_object_estimate, P_est)  # eq. (11)

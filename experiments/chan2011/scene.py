@@ -113,9 +113,10 @@ SETTINGS = {
         standoff=0.36,  # ours: pre-grasp, the camera ~25 cm from the conrod
         approach=(0.3, -0.4, 0.866),  # ours: from above, leaning 30 deg towards the robot
         approach_yaw=0 * DEG,  # ours: the conrod's long axis along the image's u axis
-        # ours: seeded search as above (every point in view, >= 8 cm from the obstacles;
-        # ~0.27 m, ~24 deg in-plane and ~31 deg out-of-plane to the goal)
-        q0_deg=(-73.2, -28.2, 104.0, 156.9, -82.5, 55.4),
+        # ours: seeded search as above (every point in view, >= 5 cm from the obstacles,
+        # ~0.27 m, ~148 deg in-plane and ~65 deg out-of-plane to the goal) among starts whose
+        # straight joint path to the goal passes near the obstacles (the paper's situation)
+        q0_deg=(-64.7, 3.6, 93.4, 134.7, -88.6, -106.9),
     ),
 }
 
