@@ -38,7 +38,7 @@ def short_config(name: str) -> object:
     if name == "dcc_audit":
         return DCCAuditConfig(n_segments=12)
     return dataclasses.replace(exp.config_cls(), duration=SHORT[name], camera_mode="exact",
-                               snapshots=0)
+                               snapshot_period=0.0)
 
 
 def short_run(name: str, out: Path) -> RunFiles:

@@ -44,8 +44,8 @@ class Chan2011Config:
                              help="render = PyBullet image + OpenCV; exact = projection")
     stop_px: float = param(0.5, unit="px", range=(0.0, None),
                            help="stop when the RMS pixel error stays under this for 0.2 s")  # ours
-    snapshots: int = param(0, range=(0, 50),
-                           help="camera and scene images saved along the run (figs 12-13)")
+    snapshot_period: float = param(0.0, unit="s", range=(0.0, None),
+                                   help="save camera and scene images every ... s (0: none)")
     seed: int = param(0, range=(0, None), help="seed (no random element yet)")
     video: bool = param(False, help="also write an animated GIF")
 
@@ -69,7 +69,8 @@ class ExperimentConfig(Chan2011Config):
     dcc: bool = param(True, help="dynamic collision checking (Sec. IV)")
     inner_loop: str = param("pd", choices=("kinematic", "pd"),
                             help="PD tracking of the quintic references at 1 kHz (Sec. V-A5)")
-    snapshots: int = param(12, range=(0, 50), help="frames for figs 12-13")  # paper: 12+ frames
+    snapshot_period: float = param(2.0, unit="s", range=(0.0, None),
+                                   help="frames for figs 12-13")  # ours
 
 
 @dataclass(frozen=True)

@@ -110,6 +110,8 @@ def frames(run_dir: Path, prefix: str, title: str) -> plt.Figure | None:
     files = sorted((run_dir / "frames").glob(f"{prefix}_*.png"))
     if not files:
         return None
+    if len(files) > 12:  # twelve frames evenly spread over the run, like the paper's
+        files = [files[i] for i in np.linspace(0, len(files) - 1, 12).round().astype(int)]
     cols = 4
     rows = int(np.ceil(len(files) / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(7.0, 1.45 * rows * 1.1))

@@ -245,7 +245,7 @@ def _snapshot(setup: Setup, q: np.ndarray, out_dir: Path, k: int) -> None:
     if setup.render is not None:
         rgb = render_rgb(setup.render.client, sc.TRUE_INTRINSICS, true_camera_pose(setup.robot, q))
         imageio.imwrite(frames / f"camera_{k:05d}.png", rgb)
-    view = p.computeViewMatrixFromYawPitchRoll([0.0, 0.35, 0.25], 1.35, 200, -30, 0, 2)
+    view = p.computeViewMatrixFromYawPitchRoll([0.0, 0.3, 0.35], 1.0, 200, -25, 0, 2)
     proj = p.computeProjectionMatrixFOV(50, 4 / 3, 0.05, 5.0)
     img = p.getCameraImage(480, 360, view, proj, renderer=p.ER_TINY_RENDERER,
                            physicsClientId=setup.world.client)
@@ -264,7 +264,7 @@ def _loop(setup: Setup, config: Chan2011Config, rec: TraceRecorder,
     q_min, q_max = np.asarray(CRS_LIMITS.q_min), np.asarray(CRS_LIMITS.q_max)
     q_ref = robot.q()
     v_ref = np.zeros(n)
-    snap_every = max(1, n_steps // config.snapshots) if config.snapshots else 0
+    snap_every = max(1, int(round(config.snapshot_period / dt))) if config.snapshot_period else 0
     below_since: float | None = None
     dcc_failing = False
     reason = "duration reached"
