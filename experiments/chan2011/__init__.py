@@ -7,26 +7,7 @@ from experiments.chan2011 import config as _c
 from experiments.chan2011.dcc_audit import DCCAuditConfig
 from experiments.chan2011.dcc_audit import run as _audit
 from experiments.chan2011.run import run
-from repro.runs.registry import Experiment, Paper
-
-
-def _figures(results_dir, figures_dir):  # type: ignore[no-untyped-def]
-    from experiments.chan2011.figures import make_figures
-
-    return make_figures(results_dir, figures_dir)
-
-
-def _claims():  # type: ignore[no-untyped-def]
-    from experiments.chan2011.claims import CLAIMS
-
-    return CLAIMS
-
-
-def _bench(results_dir):  # type: ignore[no-untyped-def]
-    from experiments.chan2011.bench import bench
-
-    return bench(results_dir)
-
+from repro.runs.registry import Experiment, Paper, lazy
 
 EXPERIMENTS = Paper(
     key="chan2011",
@@ -43,7 +24,7 @@ EXPERIMENTS = Paper(
                    "by eq. (20) + bisection, verified by dense fcl checks", DCCAuditConfig,
                    _audit),
     ),
-    figures=_figures,
-    claims=_claims,
-    bench=_bench,
+    figures=lazy("experiments.chan2011.figures", "make_figures"),
+    claims=lazy("experiments.chan2011.claims", "CLAIMS"),
+    bench=lazy("experiments.chan2011.bench", "bench"),
 )

@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
-from repro.runs.trace import RunFiles, load_run  # noqa: E402
+from repro.runs.trace import RunFiles, load_run, load_run_if_present  # noqa: E402
 
 PAPER = "chan2011"
 N = 10
@@ -180,7 +180,7 @@ def make_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
     base = Path(results_dir) / PAPER
 
     def load(name: str) -> RunFiles | None:
-        return load_run(base / name) if (base / name / "manifest.json").exists() else None
+        return load_run_if_present(base, name)
 
     written: list[Path] = []
 

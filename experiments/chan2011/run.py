@@ -22,7 +22,7 @@ from repro.control.nmpc import CameraModel, NMPCConfig, NMPCSolution, VisualNMPC
 from repro.errors import ConfigError, ReproError
 from repro.geometry import inv_T
 from repro.planning.dcc import CollisionModel, certify_segment, check_segment, free_box
-from repro.runs.trace import TraceRecorder
+from repro.runs.trace import TraceRecorder, add_vector
 from repro.sensors.camera import Camera, project_points, render_rgb, spawn_dot_target
 from repro.sim.casadi_kinematics import frame_pose_casadi
 from repro.sim.crs_a465 import (
@@ -273,10 +273,8 @@ def _loop(setup: Setup, config: Chan2011Config, rec: TraceRecorder,
         t = k * dt
         q, qd = robot.q(), robot.qd()
         row: dict[str, float | int | str | bool] = {"t": t, "step": k}
-        for i in range(n):
-            row[f"q{i + 1}"] = q[i]
-        for i in range(n):
-            row[f"qd{i + 1}"] = qd[i]
+        add_vector(row, "q", q)
+        add_vector(row, "qd", qd)
         T_wc = true_camera_pose(robot, q)
         client = setup.render.client if setup.render is not None else world.client
         uv, found, _ = setup.camera.measure(client, T_wc, sc.CONROD, s.T_object_actual)

@@ -5,26 +5,7 @@ from __future__ import annotations
 
 from experiments.thomas2024 import config as _c
 from experiments.thomas2024.run import run
-from repro.runs.registry import Experiment, Paper
-
-
-def _figures(results_dir, figures_dir):  # type: ignore[no-untyped-def]
-    from experiments.thomas2024.figures import make_figures
-
-    return make_figures(results_dir, figures_dir)
-
-
-def _claims():  # type: ignore[no-untyped-def]
-    from experiments.thomas2024.claims import CLAIMS
-
-    return CLAIMS
-
-
-def _bench(results_dir):  # type: ignore[no-untyped-def]
-    from experiments.thomas2024.bench import bench
-
-    return bench(results_dir)
-
+from repro.runs.registry import Experiment, Paper, lazy
 
 EXPERIMENTS = Paper(
     key="thomas2024",
@@ -44,7 +25,7 @@ EXPERIMENTS = Paper(
         Experiment("parallel_noisy", "thomas2024", "The parallel-planes run with 2 mm ToF noise",
                    _c.ParallelNoisyConfig, run),
     ),
-    figures=_figures,
-    claims=_claims,
-    bench=_bench,
+    figures=lazy("experiments.thomas2024.figures", "make_figures"),
+    claims=lazy("experiments.thomas2024.claims", "CLAIMS"),
+    bench=lazy("experiments.thomas2024.bench", "bench"),
 )

@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
-from repro.runs.trace import RunFiles, load_run  # noqa: E402
+from repro.runs.trace import RunFiles, load_run_if_present  # noqa: E402
 
 PAPER = "thomas2024"
 N_SENSORS = 18
@@ -143,7 +143,7 @@ def make_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
     base = Path(results_dir) / PAPER
 
     def load(name: str) -> RunFiles | None:
-        return load_run(base / name) if (base / name / "manifest.json").exists() else None
+        return load_run_if_present(base, name)
 
     written: list[Path] = []
     for name, fig_name, title in (

@@ -26,7 +26,7 @@ from repro.control.cbf_qp import (
 from repro.control.proximity_features import NormalEstimator, ring_interaction_matrix
 from repro.errors import ConfigError, UnknownChoiceError
 from repro.geometry import inv_T
-from repro.runs.trace import TraceRecorder
+from repro.runs.trace import TraceRecorder, add_vector
 from repro.sensors.camera import Camera, spawn_dot_target
 from repro.sensors.proximity import ProximityRing, RingReading, exclude_from_rays
 from repro.sim.panda import PANDA_JOINTS, PANDA_LIMITS
@@ -381,10 +381,8 @@ def _loop(setup: Setup, config: Thomas2024Config, rec: TraceRecorder,
         t = step * dt
         q, qd = robot.q(), robot.qd()
         row: dict[str, float | int | str | bool] = {"t": t, "step": step}
-        for i in range(n):
-            row[f"q{i + 1}"] = q[i]
-        for i in range(n):
-            row[f"qd{i + 1}"] = qd[i]
+        add_vector(row, "q", q)
+        add_vector(row, "qd", qd)
         T_hand = _move_hand(setup, t) if setup.scene.hand is not None else None
         # --- sensors
         tic = time.perf_counter()

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib
 import json
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -213,3 +214,15 @@ def is_stale(exp: Experiment, results_dir: Path, config: Any) -> tuple[bool, str
     if recorded != expected:
         return True, f"config changed (manifest hash {recorded!r}, current {expected!r})"
     return False, f"fresh (completed, config hash {expected[:12]})"
+
+
+def lazy(module: str, attribute: str) -> Callable[..., Any]:
+    """A callable that imports ``module`` only when called and forwards to ``attribute``
+    (so that listing experiments does not import matplotlib, CasADi...)."""
+
+    def call(*args: Any, **kwargs: Any) -> Any:
+        target = getattr(importlib.import_module(module), attribute)
+        return target(*args, **kwargs) if callable(target) else target
+
+    call.__name__ = f"{module}.{attribute}"
+    return call

@@ -56,7 +56,9 @@ __all__ = [
     "cpu_name",
     "environment",
     "git_state",
+    "add_vector",
     "load_run",
+    "load_run_if_present",
     "package_versions",
     "to_jsonable",
 ]
@@ -628,3 +630,17 @@ def load_run(run_dir: Path) -> RunFiles:
         )
     events = events.astype({"t": float, "step": "int64"})
     return RunFiles(trace=trace, events=events, manifest=manifest, scene=scene)
+
+
+def add_vector(row: dict[str, Any], name: str, values: Any) -> None:
+    """Put a vector into a trace row as columns ``name1, name2, ...`` (1-based, as papers
+    number joints and sensors)."""
+    for i, v in enumerate(values):
+        row[f"{name}{i + 1}"] = v
+
+
+def load_run_if_present(base: Path, name: str) -> RunFiles | None:
+    """``load_run(base / name)`` if that run has a manifest, else None (figures draw what
+    exists)."""
+    path = Path(base) / name
+    return load_run(path) if (path / "manifest.json").exists() else None
