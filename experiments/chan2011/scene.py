@@ -84,7 +84,9 @@ def _pose(x: float, y: float, z: float, yaw_deg: float) -> np.ndarray:
     return trans(x, y, z) @ Rz(yaw_deg * DEG)
 
 
-OBSTACLES = (  # chan2011 Tables II (L x W x H) and III (pose of the centroid)
+# chan2011 Tables II (L x W x H) and III (pose of the centroid).
+# ours: "Rz(a) T(x, y, z)" read as the centroid at (x, y, z) turned by a (see the docstring)
+OBSTACLES = (
     Box("textbook1", (0.255, 0.175, 0.025), _pose(-0.030, 0.570, 0.185, 60.0)),
     Box("textbook2", (0.235, 0.190, 0.025), _pose(-0.025, 0.450, 0.160, 95.0)),
     Box("binder", (0.290, 0.270, 0.040), _pose(-0.040, 0.440, 0.120, 0.0)),
@@ -108,7 +110,7 @@ SETTINGS = {
     # another object (out-of-plane tilt about y); the user's estimate Rz(90) at (0.1, 0.4, 0.15).
     "experiment": Setting(
         T_object_actual=trans(0.130, 0.460, 0.170) @ Rz(135 * DEG) @ Ry(12 * DEG),  # ours: 12 deg tilt
-        T_object_estimate=_pose(0.100, 0.400, 0.150, 90.0),
+        T_object_estimate=_pose(0.100, 0.400, 0.150, 90.0),  # ours: read like Table III
         obstacles=OBSTACLES,
         standoff=0.36,  # ours: pre-grasp, the camera ~25 cm from the conrod
         approach=(0.3, -0.4, 0.866),  # ours: from above, leaning 30 deg towards the robot
