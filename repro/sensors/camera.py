@@ -539,13 +539,19 @@ def detect_dots(rgb: np.ndarray, colors: Sequence[Sequence[int]],
     found = np.zeros(len(hues), dtype=bool)
     for i, hue in enumerate(hues):
         mask = _hue_mask(hsv, hue, hue_tolerance)
-        n, _, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        # Label only the bounding box of the mask's pixels (a few hundred pixels instead of
+        # the whole image); the centroid is shifted back to full-image coordinates.
+        x0, y0, w, h = cv2.boundingRect(mask)
+        if w == 0 or h == 0:
+            continue
+        n, _, stats, centroids = cv2.connectedComponentsWithStats(
+            np.ascontiguousarray(mask[y0:y0 + h, x0:x0 + w]), connectivity=8)
         if n < 2:
             continue
         k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
         if stats[k, cv2.CC_STAT_AREA] < min_area_px:
             continue
-        uv[i] = centroids[k]
+        uv[i] = centroids[k] + (x0, y0)
         found[i] = True
     return uv, found
 
