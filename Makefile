@@ -35,7 +35,7 @@ test: $(STAMP)  ## the test suite (slow runs excluded)
 test-slow: $(STAMP)  ## only the long runs marked slow
 	$(BIN)/pytest -q -m slow
 
-bench: $(STAMP)  ## controller-step and QP timings -> results/bench.csv
+bench: $(STAMP)  ## controller-step, QP, NMPC and sensor timings -> results/bench.csv
 	$(BIN)/python -m repro.bench
 
 lint: $(STAMP)  ## ruff and mypy
