@@ -296,26 +296,25 @@ def test_dot_target_validation() -> None:
         DotTarget(DOTS[:2], ((255, 0, 0), (250, 10, 0)))
 
 
-def test_opengl_matrix_with_hardware_renderer(client: int) -> None:
-    """The 'opengl' matrix is exact for ER_BULLET_HARDWARE_OPENGL (pixel-centre sampling).
-    Needs PyBullet's EGL plugin (e.g. Mesa llvmpipe); skipped where it does not load."""
-    import importlib.util
-
-    spec = importlib.util.find_spec("eglRenderer")
-    if spec is None or spec.origin is None:
-        pytest.skip("eglRenderer plugin not installed")
-    if p.loadPlugin(spec.origin, "_eglRendererPlugin", physicsClientId=client) < 0:
-        pytest.skip("EGL renderer plugin failed to load")
-    spawn_dot_target(client, SMALL_DOTS, T_WORLD_TARGET)
+@pytest.mark.parametrize(("renderer", "sample_offset"), [("tiny", 0.0), ("opengl", 0.5)])
+def test_gl_matrices_map_points_to_the_sampled_pixel(renderer: str, sample_offset: float) -> None:
+    """View x projection matrices, followed by the viewport transform, put each point on the
+    pixel ``project_points`` predicts, given where the renderer samples a pixel (its corner
+    for TinyRenderer, its centre for hardware OpenGL). Pure algebra: no renderer needed; the
+    TinyRenderer case is also checked on real images by the render tests above."""
     rng = np.random.default_rng(47)
-    for _ in range(3):
+    W, H = OFF_CENTRE.width, OFF_CENTRE.height
+    P = np.array(OFF_CENTRE.projection_matrix_gl(renderer)).reshape(4, 4, order="F")
+    for _ in range(5):
         T_wc, _ = random_view(rng, T_WORLD_TARGET)
-        rgba = p.getCameraImage(OFF_CENTRE.width, OFF_CENTRE.height, view_matrix_gl(T_wc),
-                                OFF_CENTRE.projection_matrix_gl("opengl"),
-                                renderer=p.ER_BULLET_HARDWARE_OPENGL, shadow=0,
-                                physicsClientId=client)[2]
-        rgb = np.asarray(rgba, dtype=np.uint8).reshape(OFF_CENTRE.height, OFF_CENTRE.width, 4)
-        uv, found = detect_dots(np.ascontiguousarray(rgb[:, :, :3]), SMALL_DOTS.colors)
-        assert found.all()
-        uv_exact, _ = project_points(OFF_CENTRE, T_wc, SMALL_DOTS.points_world(T_WORLD_TARGET))
-        assert np.linalg.norm(uv - uv_exact, axis=1).max() < MAX_PX_ERROR
+        V = np.array(view_matrix_gl(T_wc)).reshape(4, 4, order="F")
+        pts = SMALL_DOTS.points_world(T_WORLD_TARGET)
+        clip = (P @ V @ np.c_[pts, np.ones(len(pts))].T).T
+        ndc = clip[:, :3] / clip[:, 3:4]
+        assert np.all(np.abs(ndc[:, 2]) < 1.0)  # between the clipping planes
+        x_win = (ndc[:, 0] + 1.0) / 2.0 * W
+        y_win = (ndc[:, 1] + 1.0) / 2.0 * H
+        # pixel rgb[r, c] is sampled at window (c + s, H - 1 - r + s), origin bottom-left
+        uv_gl = np.c_[x_win - sample_offset, H - 1.0 - (y_win - sample_offset)]
+        uv_exact, _ = project_points(OFF_CENTRE, T_wc, pts)
+        np.testing.assert_allclose(uv_gl, uv_exact, atol=1e-6)

@@ -206,7 +206,7 @@ def _ibvs(setup: Setup, config: Chan2011Config, q: np.ndarray, p_k: np.ndarray) 
     T_wc = setup.robot.frame_pose("flange", q) @ T_FLANGE_CAMERA
     P_est = sc.CONROD.points_world(setup.setting.T_object_estimate)
     Z = (P_est - T_wc[:3, 3]) @ T_wc[:3, 2]
-    Z = np.where(Z > 0.02, Z, 0.02)
+    Z = np.where(Z > 0.02, Z, 0.02)  # ours: depths floored at 2 cm (a point behind the model camera)
     L = interaction_matrix_points(x, Z)
     v_c = -config.ibvs_gain * np.linalg.pinv(L) @ (x - xd).ravel()
     J_c = twist_transform(inv_T(T_FLANGE_CAMERA)) @ setup.robot.frame_jacobian("flange", q)
