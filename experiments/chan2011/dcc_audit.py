@@ -17,7 +17,10 @@ import numpy as np
 from experiments.chan2011 import scene as sc
 from repro.config import param, validate
 from repro.planning.dcc import CollisionModel, certify_segment, check_segment, swept_bound
+from repro.runs.columns import COLUMNS_FILE, Columns
 from repro.runs.trace import TraceRecorder
+from repro.sim.scene import Scene
+from repro.sim.world import WorldConfig
 from repro.sim.crs_a465 import CRS_JOINTS, CRS_LIMITS, crs_urdf_path
 
 
@@ -33,19 +36,42 @@ class DCCAuditConfig:
     seed: int = param(0, range=(0, None), help="seed of the random segments")
 
 
+def _columns() -> Columns:
+    cols = Columns()
+    cols.add("segment", "-", "segment index")
+    cols.add("d_i", "m", "python-fcl distance robot-obstacles at the segment start q_i")
+    cols.add("d_f", "m", "python-fcl distance at the segment end q_f")
+    cols.add("swept_bound", "m", "bound on the distance any robot point moves from q_i to q_f "
+             "(sum_j r_j |q_f - q_i|_j, chan2011 Sec. IV)")
+    cols.add("direct_certified", "bool", "eq. (20) certifies the whole segment at once")
+    cols.add("bisection_free", "bool", "the bisection certifies the whole segment free")
+    cols.add("bisection_collision", "bool", "the bisection found a configuration in collision")
+    cols.add("n_checks", "-", "distance queries of the bisection")
+    cols.add("depth", "-", "bisection depth reached")
+    cols.add("dense_min_distance", "m", "audit: minimum python-fcl distance over dense samples "
+             "of a certified segment (no robot point moves more than `resolution` between "
+             "two); NaN when not certified", audit=True)
+    cols.add("qi{i}", "rad", "joint {i} at the segment start", n=6)
+    cols.add("qf{i}", "rad", "joint {i} at the segment end", n=6)
+    return cols
+
+
 def run(config: DCCAuditConfig, out_dir: Path) -> Path:
     """Certify random segments with DCC, verify the certified ones densely."""
     validate(config)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    cols = _columns()
     with TraceRecorder(out_dir, experiment=out_dir.name.split("__")[0], paper="chan2011",
-                       config=config, seed=config.seed) as rec:
+                       config=config, seed=config.seed) as rec, \
+            Scene(WorldConfig(), run_dir=out_dir) as scene:
+        scene.add_urdf("crs_a465", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
+        for box in sc.OBSTACLES:
+            scene.add_box(box.name, box.size, box.T_world, sc.OBSTACLE_RGBA)
         model = CollisionModel(crs_urdf_path(), CRS_JOINTS, sc.OBSTACLES)
         r = model.radii()
-        rec.set_scene({"robot_urdf": "repro/assets/crs_a465/crs_a465.urdf",
-                       "obstacles": [{"name": b.name, "size": b.size, "T_world": b.T_world}
-                                     for b in sc.OBSTACLES],
-                       "radii_r_j": r})
+        rec.set_scene({**scene.describe(), "dcc_radii_r_j": r, "columns_file": COLUMNS_FILE,
+                       "note": "no time: one trace row per random joint-space segment"})
         rng = np.random.default_rng(config.seed)
         lo, hi = np.asarray(CRS_LIMITS.q_min), np.asarray(CRS_LIMITS.q_max)
         # Segments start near the experiment's workspace: around the configurations
@@ -66,12 +92,15 @@ def run(config: DCCAuditConfig, out_dir: Path) -> Path:
                 n = max(2, int(np.ceil(swept_bound(r, q_i, q_f) / config.resolution)) + 1)
                 dense_min = min(model.distance(q_i + s * (q_f - q_i))
                                 for s in np.linspace(0.0, 1.0, n))
-            rec.record({"segment": i, "d_i": d_i, "d_f": d_f,
-                        "swept_bound": swept_bound(r, q_i, q_f), "direct_certified": direct,
-                        "bisection_free": res.free, "bisection_collision": res.collision,
-                        "n_checks": res.n_checks, "depth": res.depth,
-                        "dense_min_distance": dense_min,
-                        **{f"qi{j + 1}": q_i[j] for j in range(6)},
-                        **{f"qf{j + 1}": q_f[j] for j in range(6)}})
+            row = {"segment": i, "d_i": d_i, "d_f": d_f,
+                   "swept_bound": swept_bound(r, q_i, q_f), "direct_certified": direct,
+                   "bisection_free": res.free, "bisection_collision": res.collision,
+                   "n_checks": res.n_checks, "depth": res.depth,
+                   "dense_min_distance": dense_min,
+                   **{f"qi{j + 1}": q_i[j] for j in range(6)},
+                   **{f"qf{j + 1}": q_f[j] for j in range(6)}}
+            if i == 0:
+                cols.write(out_dir / COLUMNS_FILE, row)
+            rec.record(row)
         rec.close("completed", f"{config.n_segments} segments")
     return out_dir

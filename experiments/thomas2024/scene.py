@@ -10,6 +10,7 @@ recorded in every run's scene.json.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,6 +49,8 @@ def ring_specs(max_range: float, noise: float) -> tuple[RingSpec, RingSpec]:
 
 RING_PARENTS = {"ring1": ("panda_link5", T_LINK5_RING1), "ring2": ("panda_link8", T_FLANGE_RING2)}
 CAMERA_PARENT = ("panda_link8", T_FLANGE_RING2 @ T_RING2_CAMERA)
+#: The optical frame (x right, y down, z forward) at the D405 body's front face, in the flange.
+T_FLANGE_CAMERA = CAMERA_PARENT[1] @ trans(0.0, 0.0, CAMERA_BODY[2] / 2)
 
 
 def attachments() -> tuple[Attachment, ...]:
@@ -61,7 +64,7 @@ def attachments() -> tuple[Attachment, ...]:
         Attachment("camera_body", cam_link, T_cam, "box", CAMERA_BODY,
                    (0.15, 0.15, 0.2, 1.0), 0.06),
         # The optical frame (x right, y down, z forward) at the body's front face.
-        Attachment("camera_optical", cam_link, T_cam @ trans(0.0, 0.0, CAMERA_BODY[2] / 2),
+        Attachment("camera_optical", cam_link, T_FLANGE_CAMERA,
                    "none", (), mass=0.0, collision=False),
     )
 
@@ -288,6 +291,19 @@ def hand_pose(hand: HandPath, t: float, ring_poses: dict[str, np.ndarray],
 
 PARKED_HAND = trans(0.0, 0.0, -5.0)  # below the floor, out of every sensor's range
 
+
+def hand_motion(hand: HandPath, ring_poses: dict[str, np.ndarray]
+                ) -> Callable[[float], np.ndarray]:
+    """The hand's scripted pose as a function of time [s] (parked between approaches);
+    ``ring_poses`` are the rings' poses at the start."""
+    radii = {s.name: s.radius for s in ring_specs(1.0, 0.0)}
+
+    def pose(t: float) -> np.ndarray:
+        T = hand_pose(hand, t, ring_poses, radii)
+        return PARKED_HAND if T is None else T
+
+    return pose
+
 __all__ = ["SCENES", "Scene", "Plane", "HandPath", "write_urdf", "ring_specs", "INTRINSICS",
            "CAMERA_PARENT", "RING_PARENTS", "target_pose", "hand_pose", "parallel_planes",
-           "PARKED_HAND", "inv_T"]
+           "PARKED_HAND", "inv_T", "hand_motion", "T_FLANGE_CAMERA", "trans", "N_SENSORS"]

@@ -13,7 +13,10 @@ theta_i = theta_0 + 2 pi (i - 1) / m_j.
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pybullet as p
@@ -75,12 +78,15 @@ class RingReading:
         hit_body: (m,) PyBullet body id of the hit (-1 when none); ground truth, for
             logging only -- the controller does not use it.
         invalid: (m,) True where the raw reading was not finite and was replaced.
+        true_delta: (m,) noise-free ray-cast distance [m] (ground truth, for the audit
+            columns only; max_range when nothing is hit); None when not known.
     """
 
     delta: np.ndarray
     detected: np.ndarray
     hit_body: np.ndarray
     invalid: np.ndarray
+    true_delta: np.ndarray | None = None
 
 
 class ProximityRing:
@@ -118,7 +124,8 @@ class ProximityRing:
         valid reading and flagged in ``invalid`` so the caller logs an event.
         """
         dist, body = self.cast(client, T_world_ring)
-        return self.sanitize(dist, body)
+        reading = self.sanitize(dist, body)
+        return dataclasses.replace(reading, true_delta=dist)
 
     def sanitize(self, dist: np.ndarray, body: np.ndarray) -> RingReading:
         """Apply noise, range limits and the fault policy to raw distances [m]."""
@@ -135,6 +142,81 @@ class ProximityRing:
         self._last_valid = noisy.copy()
         return RingReading(delta=noisy, detected=detected & ~invalid, hit_body=body,
                            invalid=invalid)
+
+
+RAY_MODEL = (
+    "sensor i of a ring: ray from S_j + r_j n_i (on the ring's outer surface) along n_i, "
+    "length max_range, pybullet.rayTestBatch with collisionFilterMask = 0xFFFF ^ 4: the "
+    "robot's links (collision group 4) are ignored, every other body is seen; reading = "
+    "hit fraction * max_range plus N(0, noise_std) noise on hits only, clipped to "
+    "[min_range, max_range]; no hit -> max_range (the 'no detection' value); a non-finite "
+    "reading is replaced by the sensor's last valid one and flagged")
+
+
+class RingSensor:
+    """A :class:`ProximityRing` on a robot frame, read by the episode runner every step.
+
+    Trace columns (prefix ``r{k}_``): ``d{i}`` the reading [m], ``dtrue{i}`` the noise-free
+    ray distance (audit), ``cbf{i}`` = reading - threshold [m].
+
+    Args:
+        ring: the ring (spec, noise generator).
+        robot: the robot carrying it (a :class:`repro.sim.robot.Robot`).
+        frame: the robot frame at the ring centre S_j (z along the ring axis).
+        client: physics client to cast rays in.
+        prefix: column prefix, e.g. ``"r1_"``.
+        threshold: delta* of the ring [m] (for the ``cbf`` columns).
+        on_read: called with (T_world_ring, reading) after each scan (normal estimation).
+    """
+
+    def __init__(self, ring: ProximityRing, robot: Any, frame: str, client: int, prefix: str,
+                 threshold: float, on_read: Any = None) -> None:
+        self.ring, self.robot, self.frame, self.client = ring, robot, frame, client
+        self.name = ring.spec.name
+        self.prefix, self.threshold, self.on_read = prefix, threshold, on_read
+
+    def read(self, t: float, q: Mapping[str, np.ndarray]) -> RingReading:
+        T = self.robot.frame_pose(self.frame, q[self.robot.name])
+        reading = self.ring.read(self.client, T)
+        if self.on_read is not None:
+            self.on_read(T, reading)
+        return reading
+
+    def columns(self, r: RingReading) -> dict[str, float]:
+        out: dict[str, float] = {}
+        true = r.true_delta if r.true_delta is not None else np.full_like(r.delta, np.nan)
+        for i in range(self.ring.spec.n_sensors):
+            out[f"{self.prefix}d{i + 1}"] = float(r.delta[i])
+        for i in range(self.ring.spec.n_sensors):
+            out[f"{self.prefix}dtrue{i + 1}"] = float(true[i])
+        for i in range(self.ring.spec.n_sensors):
+            out[f"{self.prefix}cbf{i + 1}"] = float(r.delta[i] - self.threshold)
+        return out
+
+    def events(self, r: RingReading) -> list[tuple[str, str]]:
+        if np.any(r.invalid):
+            return [("sensor_nan", f"{self.name} sensors "
+                     f"{(np.flatnonzero(r.invalid) + 1).tolist()} held last value")]
+        return []
+
+    def declare(self, cols: Any) -> None:
+        """Declare this ring's columns in a :class:`repro.runs.columns.Columns`."""
+        n, s = self.ring.spec.n_sensors, self.name
+        cols.add(f"{self.prefix}d{{i}}", "m", f"{s} sensor {{i}}: range reading delta "
+                 f"(max_range = {self.ring.spec.max_range} m when nothing is detected)", n=n)
+        cols.add(f"{self.prefix}dtrue{{i}}", "m", f"audit: {s} sensor {{i}}: noise-free ray "
+                 "distance", n=n, audit=True)
+        cols.add(f"{self.prefix}cbf{{i}}", "m", f"{s} sensor {{i}}: CBF e_delta = delta - "
+                 f"delta* (delta* = {self.threshold} m)", n=n)
+
+    def describe(self) -> dict[str, Any]:
+        """The sensor model for scene.json."""
+        s = self.ring.spec
+        return {"kind": "tof_ring", "robot": self.robot.name, "frame": self.frame,
+                "radius": s.radius, "n_sensors": s.n_sensors, "max_range": s.max_range,
+                "min_range": s.min_range, "noise_std": s.noise_std, "theta0": s.theta0,
+                "sensor_axes_ring_frame": s.directions(), "ray_model": RAY_MODEL,
+                "columns": f"{self.prefix}d1..{self.prefix}d{s.n_sensors}"}
 
 
 def exclude_from_rays(client: int, body: int) -> None:

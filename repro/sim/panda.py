@@ -76,11 +76,15 @@ def _geometry(parent: ET.Element, a: Attachment) -> None:
         ET.SubElement(geom, "box", size=" ".join(f"{s}" for s in a.size))
 
 
-def build_panda_urdf(dest: Path, attachments: tuple[Attachment, ...] = ()) -> Path:
+def build_panda_urdf(dest: Path, attachments: tuple[Attachment, ...] = (),
+                     visual_from_collision: bool = True) -> Path:
     """Write the Panda URDF (no gripper, official limits, attachments) to ``dest``.
 
-    Mesh paths are made absolute (into the installed ``pybullet_data``) so the
-    file loads from anywhere.
+    Mesh paths are made absolute (into the installed ``pybullet_data``); a
+    :class:`repro.sim.scene.Scene` copies the meshes next to a run's URDF and makes them
+    relative. With ``visual_from_collision`` the links are drawn with their collision
+    meshes (444 kB instead of 9 MB of visual meshes per run; no camera of the suite sees
+    the robot, only third-person videos do).
     """
     src_dir = Path(pybullet_data.getDataPath()) / "franka_panda"
     tree = ET.parse(src_dir / "panda.urdf")
@@ -94,6 +98,8 @@ def build_panda_urdf(dest: Path, attachments: tuple[Attachment, ...] = ()) -> Pa
             robot.remove(joint)
     for mesh in robot.iter("mesh"):
         fn = mesh.get("filename", "")
+        if visual_from_collision:
+            fn = fn.replace("meshes/visual/", "meshes/collision/").replace(".dae", ".obj")
         mesh.set("filename", str(src_dir / fn.replace("package://", "")))
     for i, name in enumerate(PANDA_JOINTS):
         arm_joint = robot.find(f"joint[@name='{name}']")

@@ -21,6 +21,12 @@ from repro.errors import ConfigError, UnknownChoiceError
 from repro.sim.world import World, pb_to_pose, pose_to_pb
 
 JACOBIAN_FRAMES = ("local", "world", "local_world_aligned")
+
+#: PyBullet URDF load flags used for every robot (recorded in scene.json).
+#: Inertias from the file (not recomputed from collision shapes); exact cylinder collision
+#: shapes (not convex hulls), so that PyBullet's distances agree with python-fcl's.
+URDF_LOAD_FLAGS = {"URDF_USE_INERTIA_FROM_FILE": p.URDF_USE_INERTIA_FROM_FILE,
+                   "URDF_USE_IMPLICIT_CYLINDER": p.URDF_USE_IMPLICIT_CYLINDER}
 _PIN_REFERENCE = {
     "local": pin.ReferenceFrame.LOCAL,
     "world": pin.ReferenceFrame.WORLD,
@@ -76,12 +82,16 @@ class Robot:
         self.joint_names = tuple(joint_names)
         self.limits = limits
         self.T_world_base = np.eye(4) if T_world_base is None else np.asarray(T_world_base)
+        self.name = self.urdf_path.stem
+        """Name of the robot in its scene."""
+        self.column_prefix = ""
+        """Prefix of the robot's trace columns (``""`` -> ``q1``; ``"pa10_"`` -> ``pa10_q1``)."""
         pos, quat = pose_to_pb(self.T_world_base)
+        self.load_flags = 0
+        for flag in URDF_LOAD_FLAGS.values():
+            self.load_flags |= flag
         self.body = p.loadURDF(
-            str(self.urdf_path), pos, quat, useFixedBase=True,
-            # Implicit cylinders: exact cylinder collision shapes (not convex hulls), so that
-            # PyBullet's distances agree with python-fcl's on the same primitives.
-            flags=p.URDF_USE_INERTIA_FROM_FILE | p.URDF_USE_IMPLICIT_CYLINDER,
+            str(self.urdf_path), pos, quat, useFixedBase=True, flags=self.load_flags,
             physicsClientId=self.client,
         )
         # PyBullet indices of joints and links (a link has the index of its parent joint).
@@ -114,6 +124,11 @@ class Robot:
         self._pin_q_key: bytes | None = None
         self._pin_q_identity = bool(np.array_equal(self._pin_q_idx, np.arange(self.model.nq)))
         self._frame_ids: dict[str, int] = {}
+        # The drives: the simulation itself clamps every joint speed to its limit, whatever
+        # the controller asks (a robot that could exist).
+        for j, qd_max in zip(self.pb_joints, self.limits.qd_max, strict=True):
+            p.changeDynamics(self.body, j, maxJointVelocity=float(qd_max),
+                             physicsClientId=self.client)
         self.velocity_mode()
 
     # ------------------------------------------------------------------ state
@@ -185,6 +200,16 @@ class Robot:
             targetVelocities=[0.0] * self.n, forces=[0.0] * self.n,
             physicsClientId=self.client,
         )
+
+    def gravity_torques(self, q: np.ndarray) -> np.ndarray:
+        """g(q): joint torques [N m] that hold the robot still at ``q`` (pinocchio RNEA with
+        zero velocity and acceleration, gravity of the world)."""
+        qp = self._pin_q(np.asarray(q, dtype=float))
+        self.model.gravity.linear = np.asarray(self.world.config.gravity, dtype=float) @ (
+            self.T_world_base[:3, :3])
+        g = pin.computeGeneralizedGravity(self.model, self.data, qp)
+        self._pin_q_key = None  # the kinematics cache no longer matches data
+        return np.asarray(g)[self._pin_q_idx]
 
     def set_torque_command(self, tau: np.ndarray) -> None:
         """Command joint torques [N m], clipped to +-tau_max (call torque_mode() first)."""

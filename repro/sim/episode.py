@@ -1,0 +1,475 @@
+"""One episode loop for every paper: scene -> sensors -> controller -> drives -> trace files.
+
+A paper supplies plain pieces in an :class:`Episode`: the :class:`~repro.sim.scene.Scene`,
+one :class:`~repro.sim.drives.Drive` per robot (the actuation mode), its eye-in-hand
+cameras (:class:`CameraRig`), its other sensors (:class:`Sensor`), scripted motions of
+moving bodies, and the controller: a function ``step(obs) -> StepResult`` with the paper's
+equations and nothing else. The runner owns everything else, identically for every paper:
+
+* the trace recorder and the run files (``trace.csv``, ``columns.json``, ``events.csv``,
+  ``manifest.json``, ``scene.json``, optional ``video.gif`` and ``frames/``);
+* per robot (column prefix ``p``): measured joint positions ``pq{i}`` and velocities
+  ``pqd{i}``, the command ``pu{i}`` as the controller gave it, and how many joints the
+  drive saturated (``pn_sat``);
+* per camera: the detected points, and beside them the audit (never read by the
+  controller): the exact projection of each model point through the true camera pose,
+  whether it is visible (in front, inside the image, no body between the camera and the
+  point), and the detection error; a detection farther than the tolerance from its
+  projection, or a hidden point reported found, is an event and is counted in the manifest;
+* ground-truth distances from every robot to every other body (``dist_*``), collision
+  events, the poses of moving bodies;
+* the NaN guard: a non-finite command never reaches a drive (the drive's safe command is
+  sent, an event is logged and the run ends with status ``failed``);
+* the stop test, the summary and the end status.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import pybullet as p
+
+from repro.errors import ConfigError
+from repro.runs.columns import COLUMNS_FILE, Columns
+from repro.runs.trace import TraceRecorder
+from repro.sensors.camera import Camera, project_points, render_rgb
+from repro.sim.drives import Drive
+from repro.sim.robot import Robot
+from repro.sim.scene import DISTANCE_CAP, Scene, pose_columns
+from repro.sim.world import pose_to_pb
+
+__all__ = ["CameraRig", "Episode", "Features", "Observation", "Sensor", "StepResult",
+           "View", "run_episode"]
+
+Scalar = float | int | str | bool
+
+#: A ray from the camera to a dot counts as blocked when it hits a body before this
+#: distance short of the dot [m] (the dots stand 0.1-0.3 mm proud of their support).
+VISIBILITY_MARGIN = 1.0e-3
+#: Rays start this far in front of the optical centre [m] (clear of the camera's own body).
+RAY_START = 5.0e-3
+
+
+@dataclass
+class Features:
+    """What a camera gives the controller: detected points [px] (NaN where not found)."""
+
+    uv: np.ndarray  # (N, 2) [px]
+    found: np.ndarray  # (N,) bool
+    Z_exact: np.ndarray  # (N,) depth of each model point [m], for the camera's "exact" mode
+
+
+@dataclass
+class CameraRig:
+    """An eye-in-hand camera measuring the dots of a scene body.
+
+    Attributes:
+        name: sensor name (in scene.json).
+        prefix: feature column prefix (``"s"`` gives ``s1_u``, ``s1_v``...).
+        camera: intrinsics and mode (render + detection, or exact projection).
+        robot: the robot carrying it.
+        frame: the robot frame the camera is fixed to (a pinocchio frame name).
+        T_frame_camera: true pose of the camera frame (x right, y down, z forward) in it.
+        target: name of the scene's ``dot_target`` body.
+        tol_px: a detection farther than this from the exact projection is an event [px].
+    """
+
+    name: str
+    prefix: str
+    camera: Camera
+    robot: Robot
+    frame: str
+    T_frame_camera: np.ndarray
+    target: str
+    tol_px: float = 2.0
+
+    def pose(self, q: np.ndarray) -> np.ndarray:
+        """T_world_camera (4x4) at joint positions ``q`` of the carrying robot."""
+        return self.robot.frame_pose(self.frame, q) @ self.T_frame_camera
+
+
+class Sensor(Protocol):
+    """A paper's other sensor (a proximity ring...): read once per control step."""
+
+    name: str
+
+    def read(self, t: float, q: Mapping[str, np.ndarray]) -> Any:
+        """The measurement at time ``t`` with the robots at ``q`` (by robot name)."""
+        ...
+
+    def columns(self, reading: Any) -> dict[str, Scalar]:
+        """Trace columns of a measurement (declared by the paper)."""
+        ...
+
+    def events(self, reading: Any) -> list[tuple[str, str]]:
+        """Events of a measurement (a sensor fault...)."""
+        ...
+
+
+@dataclass
+class Observation:
+    """Everything the controller may use at one control step."""
+
+    t: float
+    step: int
+    q: dict[str, np.ndarray]  # measured joint positions by robot name [rad]
+    qd: dict[str, np.ndarray]  # measured joint velocities [rad/s]
+    features: dict[str, Features]  # by camera name
+    sensors: dict[str, Any]  # by sensor name
+
+
+@dataclass
+class StepResult:
+    """What the controller returns: one command per robot (by name), extra trace columns,
+    events, and a stop request ``(event kind, reason)`` applied after this row."""
+
+    command: dict[str, np.ndarray]
+    columns: dict[str, Scalar] = field(default_factory=dict)
+    events: list[tuple[str, str]] = field(default_factory=list)
+    stop: tuple[str, str] | None = None
+
+
+@dataclass(frozen=True)
+class View:
+    """A third-person view for videos and snapshots (PyBullet yaw/pitch camera)."""
+
+    target: tuple[float, float, float] = (0.3, 0.0, 0.4)
+    distance: float = 1.6
+    yaw: float = 50.0
+    pitch: float = -25.0
+    width: int = 320
+    height: int = 240
+    fov: float = 55.0
+
+    def render(self, client: int) -> np.ndarray:
+        view = p.computeViewMatrixFromYawPitchRoll(list(self.target), self.distance, self.yaw,
+                                                   self.pitch, 0, 2)
+        proj = p.computeProjectionMatrixFOV(self.fov, self.width / self.height, 0.05, 5.0)
+        img = p.getCameraImage(self.width, self.height, view, proj,
+                               renderer=p.ER_TINY_RENDERER, physicsClientId=client)
+        return np.reshape(np.asarray(img[2], dtype=np.uint8),
+                          (self.height, self.width, 4))[:, :, :3]
+
+
+@dataclass
+class Episode:
+    """The pieces a paper supplies (see the module docstring)."""
+
+    scene: Scene
+    drives: dict[str, Drive]  # by robot name
+    controller: Callable[[Observation], StepResult]
+    columns: Columns  # the paper's own columns (controller and sensor columns)
+    duration: float  # [s]
+    cameras: list[CameraRig] = field(default_factory=list)
+    sensors: list[Sensor] = field(default_factory=list)
+    movers: dict[str, Callable[[float], np.ndarray]] = field(default_factory=dict)
+    video: bool = False
+    video_every: int = 3  # control steps between video frames
+    view: View = field(default_factory=View)
+    snapshot_period: float = 0.0  # [s]; 0: no frames/ snapshots
+
+    @property
+    def dt(self) -> float:
+        return self.scene.physics.config.control_dt
+
+
+# ----------------------------------------------------------------------------- columns
+def runner_columns(ep: Episode) -> Columns:
+    """The columns the runner writes for ``ep`` (the paper declares the rest)."""
+    cols = Columns()
+    cols.add("t", "s", "simulated time at the start of the control step")
+    cols.add("step", "-", "control step index (0-based)")
+    for name, drive in ep.drives.items():
+        r, pre, n = drive.robot, drive.robot.column_prefix, drive.robot.n
+        cols.add(f"{pre}q{{i}}", "rad", f"measured position of {name} joint {{i}}", n=n)
+        cols.add(f"{pre}qd{{i}}", "rad/s", f"measured velocity of {name} joint {{i}} "
+                 "(PyBullet joint state)", n=n)
+        cols.add(f"{pre}u{{i}}", drive.unit, f"{drive.mode} command of {name} joint {{i}} as "
+                 "the controller gave it (the drive applies it clipped to the joint limit)",
+                 n=n)
+        cols.add(f"{pre}n_sat", "-", f"number of {name} joints whose command the drive "
+                 f"clipped to {'tau_max' if drive.mode == 'torque' else 'qd_max'}")
+        for body in ep.scene.bodies.values():
+            if body.collision and body.robot is not r:
+                cols.add(f"{pre}dist_{body.name}", "m", f"ground truth: minimum distance "
+                         f"between the collision geometry of {name} and {body.name} (PyBullet "
+                         f"closest points, minimum over its parts; < 0 penetration; capped at "
+                         f"{DISTANCE_CAP} m)", audit=True)
+        cols.add(f"{pre}dist_min", "m", f"ground truth: minimum of {pre}dist_* over the "
+                 "obstacles (bodies with obstacle = true in scene.json)", audit=True)
+    for cam in ep.cameras:
+        n = ep.scene[cam.target].dot_target.n_points  # type: ignore[union-attr]
+        s = cam.prefix
+        cols.add(f"{s}{{i}}_u", "px", f"{cam.name}: detected u of point {{i}} (NaN if not "
+                 "found); pixel (0,0) = centre of the top-left pixel", n=n)
+        cols.add(f"{s}{{i}}_v", "px", f"{cam.name}: detected v of point {{i}} (NaN if not "
+                 "found)", n=n)
+        cols.add(f"{s}{{i}}_found", "bool", f"{cam.name}: point {{i}} detected", n=n)
+        cols.add(f"{s}{{i}}_u_true", "px", f"audit: exact projection (u) of model point {{i}} "
+                 "through the true camera pose", n=n, audit=True)
+        cols.add(f"{s}{{i}}_v_true", "px", f"audit: exact projection (v) of model point {{i}}",
+                 n=n, audit=True)
+        cols.add(f"{s}{{i}}_visible", "bool", f"audit: point {{i}} is in front of the camera, "
+                 "inside the image and no body lies between it and the camera (ray test)",
+                 n=n, audit=True)
+        cols.add(f"{s}{{i}}_err_px", "px", f"audit: distance between detection and exact "
+                 "projection of point {i} (NaN if not found)", n=n, audit=True)
+        cols.add(f"{cam.name}_render_s", "s", f"{cam.name}: wall time of render + detection")
+        for c, unit in zip(pose_columns(cam.name), ("m",) * 3 + ("-",) * 4, strict=True):
+            cols.add(c, unit, f"audit: true pose of the {cam.name} optical frame in the world "
+                     "(position, quaternion xyzw)", audit=True)
+    for body in ep.scene.moving_bodies():
+        for c, unit in zip(pose_columns(body.name), ("m",) * 3 + ("-",) * 4, strict=True):
+            cols.add(c, unit, f"pose of the moving body {body.name} in the world frame "
+                     "(position, quaternion xyzw)")
+    cols.add("ctrl_s", "s", "wall time of the controller step")
+    return cols
+
+
+# ----------------------------------------------------------------------------- audit
+def _visible(scene: Scene, T_wc: np.ndarray, P_world: np.ndarray, uv: np.ndarray,
+             Z: np.ndarray, cam: Camera) -> np.ndarray:
+    """(N,) True where a point is in front, inside the image and unoccluded (ray test in the
+    physics client, which holds every body)."""
+    c = T_wc[:3, 3]
+    d = P_world - c
+    length = np.linalg.norm(d, axis=1)
+    u = d / length[:, None]
+    start = c + RAY_START * u
+    hits = p.rayTestBatch(start.tolist(), P_world.tolist(),
+                          physicsClientId=scene.physics.client)
+    free = np.array([h[0] < 0 or h[2] * (L - RAY_START) >= (L - RAY_START) - VISIBILITY_MARGIN
+                     for h, L in zip(hits, length, strict=True)])
+    return (Z > 0) & cam.intrinsics.in_image(uv) & free
+
+
+# ----------------------------------------------------------------------------- the loop
+class _Runner:
+    def __init__(self, ep: Episode, rec: TraceRecorder, out_dir: Path) -> None:
+        self.ep, self.rec, self.out_dir = ep, rec, out_dir
+        self.cols = runner_columns(ep).extend(ep.columns)
+        self.robots = {name: d.robot for name, d in ep.drives.items()}
+        self.frames: list[np.ndarray] = []
+        self.audit = {c.name: {"mismatch_rows": 0, "hidden_found_rows": 0, "max_err_px": 0.0,
+                               "points_mismatched": set(), "points_hidden_found": set()}
+                      for c in ep.cameras}
+        self._flags: dict[str, bool] = {}
+        self.collided: set[str] = set()
+        self.t_ctrl = 0.0
+
+    def onset(self, key: str, now: bool, t: float, k: int, kind: str, detail: str,
+              end_detail: str | None = None) -> None:
+        """Log an event when a condition starts (and optionally when it ends)."""
+        was = self._flags.get(key, False)
+        if now and not was:
+            self.rec.event(t, k, kind, detail)
+        elif was and not now and end_detail is not None:
+            self.rec.event(t, k, kind + "_end", end_detail)
+        self._flags[key] = now
+
+    def measure(self, cam: CameraRig, q: np.ndarray, t: float, k: int,
+                row: dict[str, Scalar]) -> Features:
+        scene = self.ep.scene
+        body = scene[cam.target]
+        target = body.dot_target
+        assert target is not None
+        T_wc = cam.pose(q)
+        tic = time.perf_counter()
+        uv, found, Z = cam.camera.measure(scene.render_client, T_wc, target, body.T_world)
+        row[f"{cam.name}_render_s"] = time.perf_counter() - tic
+        pos, quat = pose_to_pb(T_wc)
+        for c, v in zip(pose_columns(cam.name), pos + quat, strict=True):
+            row[c] = v
+        P = target.points_world(body.T_world)
+        uv_true, _ = project_points(cam.camera.intrinsics, T_wc, P)
+        visible = _visible(scene, T_wc, P, uv_true, Z, cam.camera)
+        err = np.where(found, np.linalg.norm(uv - uv_true, axis=1), np.nan)
+        a = self.audit[cam.name]
+        with np.errstate(invalid="ignore"):
+            bad = found & ~(err <= cam.tol_px)
+        hidden = found & ~visible
+        a["mismatch_rows"] += int(bad.any())
+        a["hidden_found_rows"] += int(hidden.any())
+        if found.any():
+            a["max_err_px"] = max(a["max_err_px"], float(np.nanmax(err)))
+        for i in range(target.n_points):
+            j, s = i + 1, f"{cam.prefix}{i + 1}"
+            row[f"{s}_u"], row[f"{s}_v"] = float(uv[i, 0]), float(uv[i, 1])
+            row[f"{s}_found"] = bool(found[i])
+            row[f"{s}_u_true"], row[f"{s}_v_true"] = float(uv_true[i, 0]), float(uv_true[i, 1])
+            row[f"{s}_visible"] = bool(visible[i])
+            row[f"{s}_err_px"] = float(err[i])
+            if bad[i]:
+                a["points_mismatched"].add(j)
+            if hidden[i]:
+                a["points_hidden_found"].add(j)
+            self.onset(f"{s}_mismatch", bool(bad[i]), t, k, "feature_mismatch",
+                       f"{cam.name} point {j} detected {err[i]:.1f} px from the projection "
+                       f"of its model point (tolerance {cam.tol_px} px)",
+                       f"{cam.name} point {j} back within {cam.tol_px} px")
+            self.onset(f"{s}_hidden", bool(hidden[i]), t, k, "hidden_found",
+                       f"{cam.name} point {j} reported found but its model point is not "
+                       "visible (occluded or outside the image)",
+                       f"{cam.name} point {j} visible again or no longer found")
+        return Features(uv, found, Z)
+
+    def ground_truth(self, t: float, k: int, row: dict[str, Scalar]) -> None:
+        scene = self.ep.scene
+        for name, robot in self.robots.items():
+            pre = robot.column_prefix
+            dists = scene.distances(robot)
+            for body, d in dists.items():
+                row[f"{pre}dist_{body}"] = d
+                if d <= 0.0 and (name, body) not in self.collided:
+                    self.collided.add((name, body))  # type: ignore[arg-type]
+                    self.rec.summary[f"collided_{body}"] = True
+                    self.rec.event(t, k, "collision", f"{name} touches {body} "
+                                   f"(distance {d:.4f} m)")
+            obstacles = [d for b, d in dists.items()
+                         if scene[b].robot is None and scene[b].obstacle]
+            row[f"{pre}dist_min"] = min(obstacles) if obstacles else float("nan")
+        for body in scene.moving_bodies():
+            pos, quat = pose_to_pb(body.T_world)
+            for c, v in zip(pose_columns(body.name), pos + quat, strict=True):
+                row[c] = v
+
+    def snapshot(self, k: int) -> None:
+        import imageio.v2 as imageio
+
+        frames = self.out_dir / "frames"
+        frames.mkdir(exist_ok=True)
+        scene = self.ep.scene
+        for cam in self.ep.cameras:
+            if scene.mirror is not None:
+                rgb = render_rgb(scene.mirror.client, cam.camera.intrinsics,
+                                 cam.pose(cam.robot.q()))
+                imageio.imwrite(frames / f"camera_{k:05d}.png", rgb)
+        imageio.imwrite(frames / f"scene_{k:05d}.png", self.ep.view.render(scene.physics.client))
+
+    def run(self) -> tuple[str, str]:
+        ep, rec = self.ep, self.rec
+        world = ep.scene.physics
+        dt, h = ep.dt, world.config.physics_dt
+        n_steps = int(round(ep.duration / dt))
+        snap_every = max(1, int(round(ep.snapshot_period / dt))) if ep.snapshot_period else 0
+        status, reason = "completed", "duration reached"
+        k = 0
+        for k in range(n_steps + 1):
+            t = k * dt
+            row: dict[str, Scalar] = {"t": t, "step": k}
+            for name, T_of_t in ep.movers.items():
+                ep.scene.move(name, T_of_t(t))
+            q = {name: r.q() for name, r in self.robots.items()}
+            qd = {name: r.qd() for name, r in self.robots.items()}
+            feats = {c.name: self.measure(c, q[c.robot.name], t, k, row) for c in ep.cameras}
+            readings = {s.name: s.read(t, q) for s in ep.sensors}
+            for s in ep.sensors:
+                row.update(s.columns(readings[s.name]))
+                for kind, detail in s.events(readings[s.name]):
+                    rec.event(t, k, kind, detail)
+            tic = time.perf_counter()
+            res = ep.controller(Observation(t, k, q, qd, feats, readings))
+            row["ctrl_s"] = time.perf_counter() - tic
+            self.t_ctrl += row["ctrl_s"]
+            row.update(res.columns)
+            for kind, detail in res.events:
+                rec.event(t, k, kind, detail)
+            stop = res.stop
+            for name, drive in ep.drives.items():
+                u = np.asarray(res.command.get(name, drive.safe_command()), dtype=float)
+                pre = drive.robot.column_prefix
+                if u.shape != (drive.robot.n,) or not np.all(np.isfinite(u)):
+                    rec.event(t, k, "nan_command", f"{name}: controller command {u.tolist()} "
+                              "is not a finite vector of the right size; safe command sent, "
+                              "run stopped")
+                    u = drive.safe_command()
+                    status, reason = "failed", f"non-finite command for {name} at t = {t:.3f} s"
+                    stop = ("nan_command", reason)
+                applied = drive.command(u, dt)
+                for i in range(drive.robot.n):
+                    row[f"{pre}q{i + 1}"] = float(q[name][i])
+                    row[f"{pre}qd{i + 1}"] = float(qd[name][i])
+                    row[f"{pre}u{i + 1}"] = float(u[i])
+                row[f"{pre}n_sat"] = int(np.sum(np.abs(applied - u) > 1e-12))
+            self.ground_truth(t, k, row)
+            if k == 0:
+                self.cols.check(row)
+                self.cols.write(self.out_dir / COLUMNS_FILE, row)
+            rec.record(row)
+            if ep.video and k % ep.video_every == 0:
+                self.frames.append(ep.view.render(ep.scene.physics.client))
+            if snap_every and k % snap_every == 0:
+                self.snapshot(k)
+            if stop is not None:
+                if status == "completed":
+                    reason = stop[1]
+                    rec.event(t, k, stop[0], stop[1])
+                break
+            for i in range(1, world.steps_per_control + 1):
+                for drive in ep.drives.values():
+                    drive.substep(i, h)
+                world.step_physics()
+        rec.summary.update({"n_steps": k + 1, "sim_time_s": k * dt,
+                            "mean_control_s": self.t_ctrl / (k + 1), "stop_reason": reason})
+        rec.summary["audit"] = {
+            name: {**a, "points_mismatched": sorted(a["points_mismatched"]),
+                   "points_hidden_found": sorted(a["points_hidden_found"]),
+                   "controller_used_wrong_feature": a["mismatch_rows"] > 0}
+            for name, a in self.audit.items()}
+        if self.frames:
+            import imageio.v2 as imageio
+
+            imageio.mimsave(self.out_dir / "video.gif", self.frames, duration=ep.video_every * dt)
+        return status, reason
+
+
+def run_episode(ep: Episode, out_dir: Path, *, experiment: str, paper: str, config: Any,
+                seed: int, scene_extra: Mapping[str, Any] | None = None) -> Path:
+    """Run ``ep`` and write the run files into ``out_dir``; the scene is closed at the end.
+
+    A crash or an interrupt still closes the run (status ``crashed`` / ``interrupted``) with
+    the rows recorded so far.
+    """
+    import shutil
+
+    out_dir = Path(out_dir)
+    shutil.rmtree(out_dir / "frames", ignore_errors=True)  # no stale snapshots
+    (out_dir / "video.gif").unlink(missing_ok=True)
+    if ep.duration <= 0:
+        raise ConfigError(f"episode duration must be > 0 s, got {ep.duration}")
+    try:
+        with TraceRecorder(out_dir, experiment=experiment, paper=paper, config=config,
+                           seed=seed) as rec:
+            desc = ep.scene.describe()
+            desc["cameras"] = {c.name: {
+                "robot": c.robot.name, "frame": c.frame, "T_frame_camera": c.T_frame_camera,
+                "target": c.target, "feature_prefix": c.prefix, "mode": c.camera.mode,
+                "audit_tolerance_px": c.tol_px, **_camera_json(c.camera)} for c in ep.cameras}
+            desc["actuation"] = {name: {"mode": d.mode, "command_unit": d.unit}
+                                 for name, d in ep.drives.items()}
+            desc["columns_file"] = COLUMNS_FILE
+            desc.update(scene_extra or {})
+            rec.set_scene(desc)
+            status, reason = _Runner(ep, rec, out_dir).run()
+            rec.close(status, reason)
+    finally:
+        ep.scene.close()
+    return out_dir
+
+
+def _camera_json(cam: Camera) -> dict[str, Any]:
+    i = cam.intrinsics
+    return {"intrinsics": {"width": i.width, "height": i.height, "fu": i.fu, "fv": i.fv,
+                           "u0": i.u0, "v0": i.v0, "near": i.near, "far": i.far},
+            "convention": "camera frame x right, y down, z forward; pixel (0,0) = centre of "
+                          "the top-left pixel; u = fu X/Z + u0, v = fv Y/Z + v0",
+            "renderer": "pybullet.ER_TINY_RENDERER, shadow=0, default light, "
+                        "flags=ER_NO_SEGMENTATION_MASK; view matrix = diag(1,-1,-1,1) "
+                        "inv(T_world_camera); projection: see repro.sensors.camera."
+                        "Intrinsics.projection_matrix_gl('tiny')",
+            "projection_matrix_gl": i.projection_matrix_gl("tiny")}
