@@ -23,7 +23,7 @@ from repro.sensors.proximity import ProximityRing
 
 REF_DIR = Path(__file__).parent / "reference" / "thomas2024"
 SHORT = 1.5  # [s] of simulated time per reference run
-TIMING_COLUMNS = ("ctrl_s", "render_s", "qp_solve_s")
+TIMING_COLUMNS = ("ctrl_s", "camera_render_s", "qp_solve_s")
 #: Columns compared with the reference, and their absolute tolerances.
 COMPARED = {"q": 1e-5, "u": 1e-4, "e": 1e-3, "cbf": 1e-5, "dist": 1e-5}
 
@@ -80,22 +80,24 @@ def test_rendered_detection_matches_exact_projection(tmp_path: Path) -> None:
     within 0.5 px on states along the case-1 path."""
     ref = pd.read_csv(REF_DIR / "case1.csv")
     cfg = dataclasses.replace(C.Case1Config(), camera_mode="render")
-    setup = build(cfg, tmp_path)
+    ep, _ = build(cfg, tmp_path)
+    rig, scene = ep.cameras[0], ep.scene
+    body = scene[rig.target]
+    assert body.dot_target is not None and scene.mirror is not None
     try:
         errors = []
         for _, row in ref.iloc[::5].iterrows():
             q = row[[f"q{i}" for i in range(1, 8)]].to_numpy(float)
-            T_wc = setup.robot.frame_pose("camera_optical", q)
-            uv, found, _ = setup.camera.measure(setup.render.client, T_wc, setup.scene.target,
-                                                setup.T_world_target)
-            uv_exact, _ = project_points(setup.camera.intrinsics, T_wc,
-                                         setup.scene.target.points_world(setup.T_world_target))
+            T_wc = rig.pose(q)
+            uv, found, _ = rig.camera.measure(scene.mirror.client, T_wc, body.dot_target,
+                                              body.T_world)
+            uv_exact, _ = project_points(rig.camera.intrinsics, T_wc,
+                                         body.dot_target.points_world(body.T_world))
             assert found.all()
             errors.append(np.abs(uv - uv_exact).max())
         assert max(errors) < 0.5, max(errors)
     finally:
-        setup.world.close()
-        setup.render.close()
+        scene.close()
 
 
 def test_sensor_nan_is_handled_and_logged(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -5,11 +5,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from experiments.chan2011.columns import N_POINTS as N
+from experiments.chan2011.columns import scene_limits
 from repro.runs.claims import Claim, ClaimResult
 from repro.runs.trace import RunFiles
 
 PAPER = "chan2011"
-N = 10
+
 CONVERGED_FRACTION = 0.05  # ours: "converges" = RMS pixel error under 5 % of its start
 RIDE_FRACTION = 0.95  # ours: "rides just under its limit" = |qd| >= 95 % of the limit
 LIMIT_TOL = 1e-6  # [rad, rad/s] numerical tolerance on limits
@@ -30,7 +32,7 @@ def _pixels(run: RunFiles) -> np.ndarray:
 
 
 def _limits(run: RunFiles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    lim = run.scene["joint_limits"]
+    lim = scene_limits(run.scene)
     return (np.asarray(lim["q_min"], float), np.asarray(lim["q_max"], float),
             np.asarray(lim["qd_max_used"], float))
 
@@ -45,7 +47,7 @@ def _lost(run: RunFiles) -> str:
 
 def _fov(run: RunFiles) -> tuple[bool, float]:
     """(all points inside Table I's bounds at every step, worst margin [px])."""
-    tab = run.scene["camera_controller"]["table_I"]
+    tab = run.scene["controller_model"]["table_I"]
     p = _pixels(run)
     margins = np.stack([p[..., 0] - tab["u_min"], tab["u_max"] - p[..., 0],
                         p[..., 1] - tab["v_min"], tab["v_max"] - p[..., 1]])
@@ -58,10 +60,10 @@ def check_1(runs: dict[str, RunFiles]) -> ClaimResult:
     run = runs["simulation"]
     df = run.trace
     e = df["e_rms_px"].to_numpy(float)
-    p0 = np.array([df[f"cam_{a}"].iloc[0] for a in "xyz"])
-    p1 = np.array([df[f"cam_{a}"].iloc[-1] for a in "xyz"])
-    r0 = Rotation.from_quat([df[f"cam_q{a}"].iloc[0] for a in "xyzw"])
-    r1 = Rotation.from_quat([df[f"cam_q{a}"].iloc[-1] for a in "xyzw"])
+    p0 = np.array([df[f"camera_{a}"].iloc[0] for a in "xyz"])
+    p1 = np.array([df[f"camera_{a}"].iloc[-1] for a in "xyz"])
+    r0 = Rotation.from_quat([df[f"camera_q{a}"].iloc[0] for a in "xyzw"])
+    r1 = Rotation.from_quat([df[f"camera_q{a}"].iloc[-1] for a in "xyzw"])
     rel = (r0.inv() * r1).as_rotvec()
     t95 = df["t"].to_numpy()[np.argmax(e <= CONVERGED_FRACTION * e[0])] if np.any(
         e <= CONVERGED_FRACTION * e[0]) else float("nan")

@@ -6,6 +6,8 @@ with their audit, the true camera pose ``camera_x`` ... ``camera_qw``, ``dist_*`
 
 from __future__ import annotations
 
+import numpy as np
+
 from experiments.chan2011.scene import N_POINTS
 from repro.runs.columns import Columns
 
@@ -35,3 +37,19 @@ def declare_columns() -> Columns:
     cols.add("dcc_box_halfwidth", "rad", "largest half-width of that hyper-rectangle")
     cols.add("d_fcl", "m", "python-fcl distance of the DCC model (robot links vs obstacles) at q_k")
     return cols
+
+
+def scene_limits(scene: dict) -> dict:
+    """The CRS-A465's joint limits from a run's scene.json, with the speed limits the
+    controller used (``qd_max_used``: a fraction of the maximum speeds)."""
+    robot = next(b for b in scene["bodies"] if b["kind"] == "urdf")
+    return {**robot["joint_limits"], "qd_max_used": scene["controller_model"]["qd_max_used"]}
+
+
+def target_points_world(scene: dict) -> np.ndarray:
+    """(N, 3) world positions of the conrod's dots from a run's scene.json."""
+    from scipy.spatial.transform import Rotation
+
+    body = next(b for b in scene["bodies"] if b["kind"] == "dot_target")
+    R = Rotation.from_quat(body["pose"]["quaternion_xyzw"]).as_matrix()
+    return np.asarray(body["points_target"], float) @ R.T + np.asarray(body["pose"]["position"])

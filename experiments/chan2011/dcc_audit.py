@@ -19,9 +19,9 @@ from repro.config import param, validate
 from repro.planning.dcc import CollisionModel, certify_segment, check_segment, swept_bound
 from repro.runs.columns import COLUMNS_FILE, Columns
 from repro.runs.trace import TraceRecorder
+from repro.sim.crs_a465 import CRS_JOINTS, CRS_LIMITS, crs_urdf_path
 from repro.sim.scene import Scene
 from repro.sim.world import WorldConfig
-from repro.sim.crs_a465 import CRS_JOINTS, CRS_LIMITS, crs_urdf_path
 
 
 @dataclass(frozen=True)

@@ -11,11 +11,13 @@ import imageio.v2 as imageio  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from experiments.chan2011.columns import scene_limits, target_points_world  # noqa: E402
 from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
 from repro.runs.trace import RunFiles, load_run, load_run_if_present  # noqa: E402
 
 PAPER = "chan2011"
-N = 10
+from experiments.chan2011.columns import N_POINTS as N  # noqa: E402
+
 COLORS = [plt.get_cmap("tab10")(i) for i in range(N)]
 
 
@@ -27,9 +29,9 @@ def _pixels(run: RunFiles) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _image_axes(ax: plt.Axes, run: RunFiles) -> None:
-    tab = run.scene["camera_controller"]["table_I"]
-    w = run.scene["camera_true"]["intrinsics"]["width"]
-    h = run.scene["camera_true"]["intrinsics"]["height"]
+    tab = run.scene["controller_model"]["table_I"]
+    w = run.scene["cameras"]["camera"]["intrinsics"]["width"]
+    h = run.scene["cameras"]["camera"]["intrinsics"]["height"]
     ax.add_patch(plt.Rectangle((tab["u_min"], tab["v_min"]), tab["u_max"] - tab["u_min"],
                                tab["v_max"] - tab["v_min"], fill=False, ls=":", lw=0.8))
     ax.set_xlim(-150, w + 150)
@@ -59,13 +61,12 @@ def camera_trajectory(run: RunFiles) -> plt.Figure:
     df = run.trace
     fig = plt.figure(figsize=(4.2, 3.6))
     ax = fig.add_subplot(111, projection="3d")
-    ax.plot(df["cam_x"], df["cam_y"], df["cam_z"], color=PALETTE[0])
-    ax.scatter(df["cam_x"].iloc[0], df["cam_y"].iloc[0], df["cam_z"].iloc[0], marker="o",
+    ax.plot(df["camera_x"], df["camera_y"], df["camera_z"], color=PALETTE[0])
+    ax.scatter(df["camera_x"].iloc[0], df["camera_y"].iloc[0], df["camera_z"].iloc[0], marker="o",
                color=PALETTE[1], label="start")
-    ax.scatter(df["cam_x"].iloc[-1], df["cam_y"].iloc[-1], df["cam_z"].iloc[-1], marker="x",
+    ax.scatter(df["camera_x"].iloc[-1], df["camera_y"].iloc[-1], df["camera_z"].iloc[-1], marker="x",
                color=PALETTE[2], label="end")
-    T = np.asarray(run.scene["target"]["T_base_object_actual"], float)
-    P = np.asarray(run.scene["target"]["points_object"], float) @ T[:3, :3].T + T[:3, 3]
+    P = target_points_world(run.scene)
     ax.scatter(P[:, 0], P[:, 1], P[:, 2], s=4, color="k", label="target points")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
@@ -78,7 +79,7 @@ def camera_trajectory(run: RunFiles) -> plt.Figure:
 def joints(run: RunFiles, velocity: bool) -> plt.Figure:
     """Fig. 5 (positions, deg) or Fig. 6 (velocities, deg/s) with the limits dotted."""
     df = run.trace
-    lim = run.scene["joint_limits"]
+    lim = scene_limits(run.scene)
     fig, axes = plt.subplots(2, 3, figsize=(7.0, 3.6), sharex=True)
     for i, ax in enumerate(axes.ravel()):
         if velocity:
@@ -135,7 +136,7 @@ def baselines(runs: dict[str, RunFiles]) -> plt.Figure:
     for c, (name, run) in enumerate(runs.items()):
         image_trajectory(run, name, axes[0, c])
         df = run.trace
-        lim = run.scene["joint_limits"]
+        lim = scene_limits(run.scene)
         for i in range(6):
             span = (np.asarray(lim["q_max"]) - np.asarray(lim["q_min"]))[i]
             frac = (df[f"q{i + 1}"] - lim["q_min"][i]) / span

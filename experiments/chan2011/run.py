@@ -21,8 +21,13 @@ from repro.geometry import inv_T, trans
 from repro.planning.dcc import CollisionModel, certify_segment, check_segment, free_box
 from repro.sensors.camera import Camera, check_scene_colors, project_points
 from repro.sim.casadi_kinematics import frame_pose_casadi
-from repro.sim.crs_a465 import CRS_JOINTS, CRS_LIMITS, T_FLANGE_CAMERA, crs_urdf_path
-from repro.sim.crs_a465 import velocity_limits
+from repro.sim.crs_a465 import (
+    CRS_JOINTS,
+    CRS_LIMITS,
+    T_FLANGE_CAMERA,
+    crs_urdf_path,
+    velocity_limits,
+)
 from repro.sim.drives import PositionReferenceDrive
 from repro.sim.episode import CameraRig, Episode, Observation, StepResult, View, run_episode
 from repro.sim.robot import Robot, solve_ik

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from experiments.thomas2024 import config as C
-from experiments.thomas2024.run import Thomas2024Controller, build, run
+from experiments.thomas2024.run import build, run
 from repro.bench import timing_row
 from repro.runs.trace import load_run
 
@@ -34,20 +34,20 @@ def _states(results_dir: Path, case: str, cfg: C.Thomas2024Config, tmp: Path) ->
 
 
 def _replay(cfg: C.Thomas2024Config, states: np.ndarray, tmp: Path) -> dict[str, list[float]]:
-    setup = build(cfg, tmp / "bench_setup")
-    ctrl = Thomas2024Controller(setup, cfg)
+    ep, ctrl = build(cfg, tmp / "bench_setup")
+    rig, scene = ep.cameras[0], ep.scene
+    target = scene[rig.target]
+    assert target.dot_target is not None
     out: dict[str, list[float]] = {"step": [], "qp": [], "rays": [], "camera": []}
     try:
         for q in states:
-            setup.robot.reset(q)
+            rig.robot.reset(q)
             tic = time.perf_counter()
-            T_wc = setup.robot.frame_pose("camera_optical", q)
-            client = setup.render.client if setup.render is not None else setup.world.client
-            uv, found, Z = setup.camera.measure(client, T_wc, setup.scene.target,
-                                                setup.T_world_target)
+            uv, found, Z = rig.camera.measure(scene.render_client, rig.pose(q), target.dot_target,
+                                              target.T_world)
             out["camera"].append(time.perf_counter() - tic)
             tic = time.perf_counter()
-            readings = ctrl.read_rings(q)
+            readings = [s.read(0.0, {rig.robot.name: q}) for s in ep.sensors]
             out["rays"].append(time.perf_counter() - tic)
             tic = time.perf_counter()
             res = ctrl.step(q, uv, found, Z, readings)
@@ -55,9 +55,7 @@ def _replay(cfg: C.Thomas2024Config, states: np.ndarray, tmp: Path) -> dict[str,
             if res.status != "no_features":
                 out["qp"].append(res.solve_s)
     finally:
-        setup.world.close()
-        if setup.render is not None:
-            setup.render.close()
+        scene.close()
     return out
 
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from experiments.thomas2024.columns import N_JOINTS
+from experiments.thomas2024.columns import N_SENSORS as N
 from repro.runs.claims import Claim, ClaimResult
 from repro.runs.metrics import (
     first_time_below,
@@ -17,7 +19,6 @@ from repro.runs.metrics import (
 from repro.runs.trace import RunFiles
 
 PAPER = "thomas2024"
-N = 18
 NEAR_CONTACT = 0.01  # ours: "close to virtual contact" = CBF e_delta <= 1 cm
 NOISE_MARGIN = 0.01  # ours: "CBFs >= 0 up to noise" = e_delta >= -1 cm (5 sigma of 2 mm noise)
 CONVERGED_FRACTION = 0.02  # ours: global convergence = ||e_4p|| below 2 % of its start
@@ -147,7 +148,7 @@ def check_4(runs: dict[str, RunFiles]) -> ClaimResult:
     active = [int(i) + 1 for i in np.flatnonzero(k2 > KAPPA_ZERO)]
     contact_end = [i for i in range(1, N + 1) if df[f"r2_cbf{i}"].iloc[-1] <= NEAR_CONTACT]
     g1 = _groups(_first_contacts(df, 1))
-    u_abs = df[[f"u{i}" for i in range(1, 8)]].abs().max(axis=1).to_numpy(float)
+    u_abs = df[[f"u{i}" for i in range(1, N_JOINTS + 1)]].abs().max(axis=1).to_numpy(float)
     u_end, u_peak = float(u_abs[-1]), float(np.nanmax(u_abs))
     e_end = _e_px(run)[-1]
     t_contact = min((t for t, i in _first_contacts(df, 2) if i in contact_end), default=np.nan)
@@ -175,9 +176,9 @@ def _oscillation(run: RunFiles) -> tuple[float, float]:
     sel = t >= start
     dt = float(np.median(np.diff(t)))
     sc = [sign_changes_per_second(t[sel], df[f"u{i}"].to_numpy()[sel], OSC_DEADBAND)
-          for i in range(1, 8)]
+          for i in range(1, N_JOINTS + 1)]
     hf = [high_frequency_fraction(df[f"u{i}"].to_numpy()[sel], dt, OSC_CUTOFF_HZ)
-          for i in range(1, 8)]
+          for i in range(1, N_JOINTS + 1)]
     return float(np.mean(sc)), float(np.mean(hf))
 
 

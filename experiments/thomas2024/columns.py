@@ -11,6 +11,8 @@ from experiments.thomas2024.scene import N_SENSORS
 from repro.runs.columns import Columns
 
 N_POINTS = 4  # thomas2024 Sec. V: four image points
+N_JOINTS = 7  # the Panda
+__all__ = ["N_JOINTS", "N_POINTS", "N_RINGS", "N_SENSORS", "declare_columns", "ring_columns"]
 N_RINGS = 2
 
 

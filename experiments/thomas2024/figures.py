@@ -21,7 +21,8 @@ from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
 from repro.runs.trace import RunFiles, load_run_if_present  # noqa: E402
 
 PAPER = "thomas2024"
-N_SENSORS = 18
+from experiments.thomas2024.columns import N_SENSORS  # noqa: E402
+
 CBF_YLIM = (-0.03, 0.25)  # [m]: shows virtual contact; far readings (up to 0.96 m) are clipped
 
 
@@ -79,7 +80,7 @@ def ablation_no_proximity(with_cbf: RunFiles, without: RunFiles) -> plt.Figure:
                               (without, "no proximity constraints", PALETTE[1])):
         df = run.trace
         axes[0].plot(df["t"], df["dist_min"], color=color, label=label)
-        axes[1].plot(df["t"], df["e_norm"] * run.scene["camera"]["intrinsics"]["fu"],
+        axes[1].plot(df["t"], df["e_norm"] * run.scene["cameras"]["camera"]["intrinsics"]["fu"],
                      color=color, label=label)
     axes[0].axhline(0.0, color="k", lw=0.6, ls="--")
     axes[0].set_ylabel("true min. distance robot-obstacles (m)")

@@ -40,7 +40,7 @@ from repro.runs.trace import TraceRecorder
 from repro.sensors.camera import Camera, project_points, render_rgb
 from repro.sim.drives import Drive
 from repro.sim.robot import Robot
-from repro.sim.scene import DISTANCE_CAP, Scene, pose_columns
+from repro.sim.scene import DISTANCE_CAP, Scene, pose_columns, pose_json
 from repro.sim.world import pose_to_pb
 
 __all__ = ["CameraRig", "Episode", "Features", "Observation", "Sensor", "StepResult",
@@ -210,14 +210,14 @@ def runner_columns(ep: Episode) -> Columns:
         cols.add(f"{s}{{i}}_v", "px", f"{cam.name}: detected v of point {{i}} (NaN if not "
                  "found)", n=n)
         cols.add(f"{s}{{i}}_found", "bool", f"{cam.name}: point {{i}} detected", n=n)
-        cols.add(f"{s}{{i}}_u_true", "px", f"audit: exact projection (u) of model point {{i}} "
+        cols.add(f"{s}{{i}}_u_true", "px", "audit: exact projection (u) of model point {i} "
                  "through the true camera pose", n=n, audit=True)
-        cols.add(f"{s}{{i}}_v_true", "px", f"audit: exact projection (v) of model point {{i}}",
+        cols.add(f"{s}{{i}}_v_true", "px", "audit: exact projection (v) of model point {i}",
                  n=n, audit=True)
-        cols.add(f"{s}{{i}}_visible", "bool", f"audit: point {{i}} is in front of the camera, "
+        cols.add(f"{s}{{i}}_visible", "bool", "audit: point {i} is in front of the camera, "
                  "inside the image and no body lies between it and the camera (ray test)",
                  n=n, audit=True)
-        cols.add(f"{s}{{i}}_err_px", "px", f"audit: distance between detection and exact "
+        cols.add(f"{s}{{i}}_err_px", "px", "audit: distance between detection and exact "
                  "projection of point {i} (NaN if not found)", n=n, audit=True)
         cols.add(f"{cam.name}_render_s", "s", f"{cam.name}: wall time of render + detection")
         for c, unit in zip(pose_columns(cam.name), ("m",) * 3 + ("-",) * 4, strict=True):
@@ -447,7 +447,8 @@ def run_episode(ep: Episode, out_dir: Path, *, experiment: str, paper: str, conf
                            seed=seed) as rec:
             desc = ep.scene.describe()
             desc["cameras"] = {c.name: {
-                "robot": c.robot.name, "frame": c.frame, "T_frame_camera": c.T_frame_camera,
+                "robot": c.robot.name, "frame": c.frame,
+                "T_frame_camera": pose_json(c.T_frame_camera),
                 "target": c.target, "feature_prefix": c.prefix, "mode": c.camera.mode,
                 "audit_tolerance_px": c.tol_px, **_camera_json(c.camera)} for c in ep.cameras}
             desc["actuation"] = {name: {"mode": d.mode, "command_unit": d.unit}

@@ -36,7 +36,7 @@ import pybullet as p
 import pybullet_data
 
 from repro.errors import ConfigError, UnknownChoiceError
-from repro.sensors.camera import DotTarget, spawn_dot_target, move_dot_target
+from repro.sensors.camera import DotTarget, move_dot_target, spawn_dot_target
 from repro.sim.robot import URDF_LOAD_FLAGS, JointLimits, Robot
 from repro.sim.world import World, WorldConfig, pose_to_pb
 
