@@ -251,6 +251,10 @@ def test_infeasible_rows_are_relaxed(solver: str, max_iter: int | None) -> None:
     np.testing.assert_allclose(res.u, x_ref[:N], atol=1e-6)
     np.testing.assert_allclose(res.slack, x_ref[N:], atol=1e-6)
     np.testing.assert_allclose(res.kappa, kappa_ref, atol=1e-5 * max(1.0, kappa_ref.max()))
+    # u is the relaxed QP's: so are the reported iterations, each solve within its budget.
+    assert res.relaxed_solution is not None and res.command_solution is res.relaxed_solution
+    assert res.iterations == res.relaxed_solution.iterations <= ctrl.relaxed_max_iter
+    assert res.solution.iterations <= ctrl.max_iter
     # The controller recovers once the conflict is gone.
     res3 = ctrl.step(obj, Inequalities(A, np.full(M, -10.0)), QD_MAX)
     assert res3.status == "solved"
@@ -324,3 +328,59 @@ def test_proxsuite_cold_solution_is_accurate() -> None:
     res = CBFQPController(N, M, solver="proxsuite").step(obj, ineq, QD_MAX)
     assert res.status == "solved"
     np.testing.assert_allclose(res.u, x_ref, atol=1e-6)
+
+
+# Budgets between what the easy step needs and what the hard QP needs (seed 8): proxsuite
+# 2 and 11 outer iterations, OSQP 75 and 375 ADMM iterations (convergence checked every 25).
+_SMALL_CAP = {"proxsuite": 4, "osqp": 100}
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_hard_qp_over_budget_goes_to_the_fallback(solver: str) -> None:
+    """The hard QP needs more iterations than max_iter: it is "max_iter" (never "solved"),
+    after a warm attempt and a cold retry each within the budget, and u comes from the
+    relaxed QP, whose iterations are the ones reported for the command."""
+    cap = _SMALL_CAP[solver]
+    rng = np.random.default_rng(8)
+    obj, ineq = _random_cbf_qp(rng)
+    needs = CBFQPController(N, M, solver=solver, max_iter=10000).step(obj, ineq, QD_MAX)
+    assert needs.status == "solved" and needs.solution.iterations > cap
+    ctrl = CBFQPController(N, M, solver=solver, max_iter=cap)
+    easy_obj, _, _ = _objective(rng, scale=0.05)
+    easy = ctrl.step(easy_obj, Inequalities(ineq.A, np.full(M, -10.0)), QD_MAX)
+    assert easy.status == "solved" and easy.solution.iterations <= cap
+    # Now warm: the hard QP runs out twice (warm, then cold).
+    res = ctrl.step(obj, ineq, QD_MAX)
+    assert res.solution.iterations == cap
+    # The step within the budget: u is the hard QP's, so are the iterations and the time.
+    assert easy.relaxed_solution is None and easy.command_solution is easy.solution
+    assert easy.iterations == easy.solution.iterations
+    assert easy.solve_time_s == easy.solution.solve_time_s
+    assert res.qp_status == "max_iter" and res.solution.status == "max_iter"
+    assert res.solution.attempts == 2 and res.solution.total_iterations == 2 * cap
+    assert res.status == "relaxed"
+    rs = res.relaxed_solution
+    assert rs is not None and rs.status == "solved"
+    assert res.iterations == rs.iterations <= ctrl.relaxed_max_iter
+    assert res.solve_time_s == res.solution.solve_time_s + rs.solve_time_s
+    # u is the slack QP's exact solution (daqp); the QP was feasible, so the slack is tiny.
+    H = np.zeros((N + M, N + M))
+    H[:N, :N] = obj.H
+    H[N:, N:] = ctrl.slack_weight * np.eye(M)
+    x_ref, _ = _daqp(H, np.r_[obj.g, np.zeros(M)], np.hstack([ineq.A, np.eye(M)]), ineq.b,
+                     np.r_[-QD_MAX, np.zeros(M)], np.r_[QD_MAX, np.full(M, np.inf)])
+    np.testing.assert_allclose(res.u, x_ref[:N], atol=1e-6)
+    np.testing.assert_allclose(res.slack, x_ref[N:], atol=1e-6)
+    np.testing.assert_allclose(res.u, needs.u, atol=1e-2)
+
+
+def test_failed_step_reports_the_hard_qp() -> None:
+    """Both QPs unsolved (NaN cost): u = 0, and iterations are the hard QP's (0 here: the
+    data never reach the backend)."""
+    ctrl = CBFQPController(N, M, solver="proxsuite")
+    obj = Objective(np.eye(N), np.full(N, np.nan))
+    res = ctrl.step(obj, Inequalities(np.ones((M, N)), np.zeros(M)), QD_MAX)
+    assert res.status == "failed" and res.command_solution is None
+    np.testing.assert_array_equal(res.u, 0.0)
+    assert res.relaxed_solution is not None and res.relaxed_solution.status == "failed"
+    assert res.iterations == res.solution.iterations == 0

@@ -285,7 +285,8 @@ def test_random_cbf_qps_osqp_default_budget_never_wrong(cbf_problems) -> None:
         sol = qp.solve(p)
         statuses.append(sol.status)
         assert sol.status in ("solved", "max_iter")
-        assert sol.iterations <= 2 * 1000  # a warm attempt plus at most one cold retry
+        assert sol.iterations <= 1000  # the budget holds for the attempt that gave x
+        assert sol.total_iterations <= 2 * 1000  # a warm attempt plus at most one cold retry
         if sol.status == "solved":
             np.testing.assert_allclose(sol.x, x_ref, atol=1e-6, rtol=0)
     assert statuses.count("solved") >= 0.95 * len(statuses)
@@ -304,7 +305,8 @@ def test_wrong_backend_success_is_downgraded_to_failed() -> None:
         def solve(self, d):
             _Liar.calls += 1
             # Feasible, active x = (1, 2), but z = +1 on a row with u = +inf (wrong sign).
-            return _RawResult(np.array([1.0, 2.0]), np.array([1.0]), np.zeros(2), "solved", 3)
+            return _RawResult(np.array([1.0, 2.0]), np.array([1.0]), np.zeros(2), "solved",
+                              2 + _Liar.calls, 5)
 
         def reset(self):
             self.is_warm = False
@@ -317,7 +319,9 @@ def test_wrong_backend_success_is_downgraded_to_failed() -> None:
     assert res["primal_infeasibility"] == 0.0
     assert sol.status == "failed"
     assert _Liar.calls == 2  # warm attempt, then one cold retry
-    assert sol.iterations == 6
+    # The reported iterations are the retry's (the attempt sol.x comes from), not a sum.
+    assert (sol.iterations, sol.inner_iterations) == (4, 5)
+    assert (sol.total_iterations, sol.attempts) == (3 + 4, 2)
 
 
 def test_kkt_residuals_detect_each_violation() -> None:
@@ -325,7 +329,7 @@ def test_kkt_residuals_detect_each_violation() -> None:
     problem = QPProblem(np.eye(2), np.zeros(2), np.array([[1.0, 2.0]]), np.array([5.0]),
                         np.array([np.inf]), np.full(2, -10.0), np.full(2, 10.0))  # fmt: skip
     exact = QPSolution(np.array([1.0, 2.0]), np.array([-1.0]), np.zeros(2), "solved", 0, 0.0,
-                       0.0, 0.0)  # fmt: skip
+                       0.0, 0.0, 0, 0, 1)  # fmt: skip
     assert max(kkt_residuals(problem, exact).values()) < 1e-14
     infeasible = exact._replace(x=np.array([0.5, 1.0]))  # a'x = 2.5 < 5
     res = kkt_residuals(problem, infeasible)
@@ -346,6 +350,7 @@ def test_kkt_residuals_detect_each_violation() -> None:
 def _infeasible_cbf() -> QPProblem:
     """Two opposite proximity sensors both under threshold: a'x >= b and -a'x >= b, b > 0."""
     p = _cbf_sequence(seed=7, count=1)[0]
+    assert p.C is not None and p.l is not None
     C, l = p.C.copy(), p.l.copy()
     C[1] = -C[0]
     l[0] = l[1] = 0.3
@@ -363,8 +368,8 @@ def test_infeasible_is_reported_not_raised(solver: str) -> None:
     elapsed = time.perf_counter() - t0
     assert sol.status in ("infeasible", "max_iter")
     assert elapsed < 1.0
-    if solver == "osqp":  # proxsuite's max_iter bounds outer iterations, not sol.iterations
-        assert sol.iterations <= 2 * 1000  # a warm attempt plus at most one cold retry
+    assert sol.iterations <= 1000  # the default budget, per attempt
+    assert sol.total_iterations <= 2 * 1000  # a warm attempt plus at most one cold retry
     assert np.all(np.isfinite(sol.x)) and np.all(np.isfinite(sol.z))
     assert np.all(np.isfinite(sol.z_box))
     # The controller carries on: the next feasible problem is solved again, from a cold
@@ -383,10 +388,14 @@ def test_max_iter_bounds_the_work_on_infeasible_problems(solver: str) -> None:
     for max_iter in (20, 1000):
         sol = QPSolver(N_JOINTS, N_SENSORS, solver, max_iter=max_iter).solve(infeasible)
         assert sol.status in ("infeasible", "max_iter")
-        work[max_iter] = sol.iterations
+        assert sol.iterations <= max_iter
+        if sol.status == "max_iter":
+            assert sol.iterations == max_iter
+        work[max_iter] = sol.inner_iterations
     assert work[20] <= work[1000]
     if solver == "proxsuite":  # never certifies infeasibility here: it runs out of budget
         assert work[20] < work[1000]
+        assert work[20] <= 20 * (20 + 1)  # max_iter_in defaults to max_iter
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
@@ -478,3 +487,140 @@ def test_no_warm_start_repeats_the_cold_solve(solver: str) -> None:
     first, second = qp.solve(problem), qp.solve(problem)
     assert first.status == second.status == "solved"
     assert second.iterations == first.iterations
+
+
+# --------------------------------------------------------------------------------------
+# 6. The iteration budget, and what counts as an iteration
+# --------------------------------------------------------------------------------------
+
+
+def _two_walls(rng: np.random.Generator) -> QPProblem:
+    """A nearly degenerate CBF-QP: two rings of 18 sensors facing two parallel walls.
+
+    The rows of each ring are one row ``+a`` or ``-a`` up to 1e-3 and nearly all active at
+    a feasible ``u0`` (margins ~1e-4), the cost has the paper's rank-6 task Jacobian. proxsuite
+    runs long inner Newton loops on these (the thomas2024 ``parallel`` run logged up to
+    276,099 Newton steps for one "solved" QP with ``max_iter = 200``).
+    """
+    J = rng.normal(size=(8, 6)) @ rng.normal(size=(6, N_JOINTS))
+    a = rng.normal(size=N_JOINTS)
+    C = np.vstack([a + 1e-3 * rng.normal(size=(18, N_JOINTS)),
+                   -a + 1e-3 * rng.normal(size=(18, N_JOINTS))])  # fmt: skip
+    u0 = rng.uniform(-0.3, 0.3, N_JOINTS)
+    return QPProblem(H=J.T @ J + 0.01 * np.eye(N_JOINTS),
+                     g=0.08 * J.T @ rng.normal(size=8), C=C,
+                     l=C @ u0 - rng.exponential(1e-4, N_SENSORS),
+                     u=np.full(N_SENSORS, np.inf), lb=-V_MAX, ub=V_MAX)  # fmt: skip
+
+
+def test_solved_degenerate_qps_stay_within_the_budget() -> None:
+    """proxsuite, warm-started over 20 two-wall QPs with a budget of 30: no attempt reports
+    more than 30 iterations, "solved" ones are KKT points (and agree with a large budget),
+    the others ran out ("max_iter" at exactly 30). Before the fix proxsuite's inner Newton
+    steps were reported: 41, 108, ... for QPs it called "solved"."""
+    cap = 30
+    rng = np.random.default_rng(0)
+    qp = QPSolver(N_JOINTS, N_SENSORS, "proxsuite", max_iter=cap)
+    statuses = []
+    n_many_newton_steps = 0
+    for k in range(20):
+        p = _two_walls(rng)
+        sol = qp.solve(p)
+        statuses.append(sol.status)
+        assert sol.iterations <= cap, (k, sol.status, sol.iterations)
+        assert sol.total_iterations <= sol.attempts * cap
+        assert sol.inner_iterations <= cap * (cap + 1)  # max_iter_in defaults to max_iter
+        assert sol.status in ("solved", "max_iter"), k
+        if sol.status == "max_iter":
+            assert sol.iterations == cap
+            continue
+        n_many_newton_steps += sol.inner_iterations > cap
+        _assert_kkt_small(p, sol, 1e-6)
+        ref = QPSolver(N_JOINTS, N_SENSORS, "proxsuite", max_iter=10000).solve(p)
+        assert ref.status == "solved"
+        np.testing.assert_allclose(sol.x, ref.x, atol=1e-6, err_msg=f"problem {k}")
+    # The set exercises both outcomes, and solves whose Newton steps exceed the budget.
+    assert statuses.count("solved") >= 10 and "max_iter" in statuses, statuses
+    assert n_many_newton_steps >= 5
+
+
+# Budgets between the easy QP's needs and the hard one's (cold and warm): proxsuite needs 2
+# outer iterations on _EASY, >= 9 on _cbf_sequence(3); OSQP checks convergence every 25
+# ADMM iterations: 100 on _EASY, >= 175 on _cbf_sequence(3).
+_SMALL_CAP = {"proxsuite": 4, "osqp": 125}
+_EASY = QPProblem(np.eye(N_JOINTS), np.full(N_JOINTS, 0.01), np.ones((N_SENSORS, N_JOINTS)),
+                  np.full(N_SENSORS, -1.0), np.full(N_SENSORS, np.inf), -V_MAX, V_MAX)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_over_budget_is_max_iter_even_after_a_cold_retry(solver: str) -> None:
+    """A QP that needs more than the budget, warm-started: the warm attempt and the cold
+    retry each run out; the result is "max_iter" with the retry's count (= the budget),
+    not the sum of both (2x the budget before the fix)."""
+    cap = _SMALL_CAP[solver]
+    hard = _cbf_sequence(seed=3, count=1)[0]
+    needs = QPSolver(N_JOINTS, N_SENSORS, solver, max_iter=10000).solve(hard)
+    assert needs.status == "solved" and needs.iterations > cap
+    qp = QPSolver(N_JOINTS, N_SENSORS, solver, max_iter=cap)
+    easy = qp.solve(_EASY)
+    assert easy.status == "solved" and easy.iterations <= cap  # now warm
+    sol = qp.solve(hard)
+    assert sol.status == "max_iter"
+    assert sol.iterations == cap
+    assert qp.cold_retries == 1 and sol.attempts == 2
+    assert sol.total_iterations == 2 * cap
+    assert np.all(np.isfinite(sol.x))
+
+
+def _starve_warm_backend(qp: QPSolver) -> None:
+    """Give the warm backend state a budget of 1 iteration for its next solve, so that the
+    warm attempt fails and :meth:`QPSolver.solve` retries cold with the real budget."""
+    backend = qp._backend
+    if qp.solver == "proxsuite":
+        backend._qp.settings.max_iter = 1  # type: ignore[union-attr]
+    else:
+        backend._solver.update_settings(max_iter=1)  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_iterations_are_those_of_the_cold_retry(solver: str) -> None:
+    """After a failed warm attempt the solution, status and iterations are the cold
+    retry's: the same as a fresh solver's on that QP (cold solves are deterministic);
+    the warm attempt's iteration shows only in total_iterations."""
+    first, second = _cbf_sequence(seed=11, count=2, step=0.5)
+    qp = QPSolver(N_JOINTS, N_SENSORS, solver, max_iter=10000)
+    assert qp.solve(first).status == "solved"
+    _starve_warm_backend(qp)
+    sol = qp.solve(second)
+    fresh = QPSolver(N_JOINTS, N_SENSORS, solver, max_iter=10000).solve(second)
+    assert fresh.status == sol.status == "solved"
+    assert sol.iterations == fresh.iterations > 1
+    assert (qp.cold_retries, sol.attempts) == (1, 2)
+    assert sol.inner_iterations == fresh.inner_iterations
+    assert sol.total_iterations == 1 + fresh.iterations
+    np.testing.assert_allclose(sol.x, fresh.x, atol=1e-12)
+    np.testing.assert_allclose(sol.x, _reference(second)[0], atol=1e-6)  # daqp
+    # The real budget is back for the warm solves that follow.
+    again = qp.solve(second)
+    assert again.status == "solved" and again.attempts == 1
+
+
+def test_proxsuite_budget_sets_both_loops() -> None:
+    """max_iter caps proxsuite's outer loop, max_iter_in (default max_iter) its inner one."""
+    p = _cbf_sequence(seed=3, count=1)[0]
+    qp = QPSolver(N_JOINTS, N_SENSORS, "proxsuite", max_iter=50)
+    assert qp.solve(p).status == "solved"
+    settings = qp._backend._qp.settings  # type: ignore[union-attr]
+    assert (settings.max_iter, settings.max_iter_in) == (50, 50)
+    qp2 = QPSolver(N_JOINTS, N_SENSORS, "proxsuite", max_iter=50, max_iter_in=7)
+    sol = qp2.solve(p)
+    assert qp2._backend._qp.settings.max_iter_in == 7  # type: ignore[union-attr]
+    assert sol.iterations <= sol.inner_iterations <= 50 * (7 + 1)
+
+
+@pytest.mark.parametrize("bad", [0, -3, 2.5])
+def test_bad_budget_is_rejected(bad: float) -> None:
+    with pytest.raises(ConfigError, match="max_iter"):
+        QPSolver(2, 1, "proxsuite", max_iter=bad)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="max_iter_in"):
+        QPSolver(2, 1, "proxsuite", max_iter_in=bad)  # type: ignore[arg-type]

@@ -35,7 +35,9 @@ def declare_columns(n_joints: int, proximity: bool) -> Columns:
                  "sensor {i} (0 when inactive or without proximity)", n=N_SENSORS)
     cols.add("qp_status", "text", "solved | relaxed (slack-relaxed CBFs) | failed (u = 0) | "
              "no_features (u = 0)")
-    cols.add("qp_iter", "-", "iterations of the QP solve whose solution is the command")
+    cols.add("qp_iter", "-", "iterations of the one QP solve whose solution is the command "
+             "(proxsuite: outer iterations; osqp: ADMM iterations); <= qp_max_iter for the "
+             "hard QP, <= the relaxed QP's budget when qp_status is relaxed")
     cols.add("qp_max_slack", "m/s", "largest slack of the relaxed CBF rows (0 when hard)")
     cols.add("qp_solve_s", "s", "solver time of the QP solves of this step")
     cols.add("grad_L0", "-", "||grad_u L(0, kappa*)||, the Lagrangian stop test of Sec. III-C")

@@ -132,7 +132,7 @@ class Thomas2024Controller:
         res = self.qp.step(ibvs_objective(J_4p, e_4p, cfg.lambda_4p, cfg.mu), Inequalities(A, b),
                            self.qd_max)
         return StepOutput(res.u, res.status, e_4p, res.kappa, res.grad_L0,
-                          res.solution.iterations, res.solution.solve_time_s,
+                          res.iterations, res.solve_time_s,
                           float(res.slack.max()) if m else 0.0, res.qp_status)
 
     def __call__(self, obs: Observation) -> StepResult:

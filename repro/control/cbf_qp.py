@@ -86,7 +86,10 @@ class CBFQPResult:
             relaxed QP when status is "relaxed".
         grad_L0: ||grad_u L(0, kappa*)|| = ||c - A^T kappa*|| (Sec. III-C stopping test).
         slack: (m,) CBF violations accepted by the relaxed QP [same units as b] (0 if solved).
-        solution: the hard QP's raw solution.
+        solution: the hard QP's raw solution (``solution.iterations`` is the hard QP's,
+            also when u comes from the relaxed QP: use :attr:`iterations` for the command's).
+        relaxed_solution: the slack-relaxed QP's solution when it was tried (hard QP not
+            solved), else None.
     """
 
     u: np.ndarray
@@ -96,6 +99,31 @@ class CBFQPResult:
     grad_L0: float
     slack: np.ndarray
     solution: QPSolution
+    relaxed_solution: QPSolution | None = None
+
+    @property
+    def command_solution(self) -> QPSolution | None:
+        """The solve whose ``x`` is u: the hard QP when "solved", the relaxed QP when
+        "relaxed", None when "failed" (u = 0)."""
+        if self.status == "solved":
+            return self.solution
+        if self.status == "relaxed":
+            return self.relaxed_solution
+        return None
+
+    @property
+    def iterations(self) -> int:
+        """Iterations of the one solve whose solution is u (:attr:`command_solution`; the
+        hard QP's when "failed"), at most that solve's ``max_iter``: outer ALM iterations
+        for proxsuite, ADMM iterations for OSQP (see :mod:`repro.control.qp`)."""
+        sol = self.command_solution
+        return (self.solution if sol is None else sol).iterations
+
+    @property
+    def solve_time_s(self) -> float:
+        """Wall time of every QP solve of this step (hard, plus relaxed if tried) [s]."""
+        t = self.solution.solve_time_s
+        return t if self.relaxed_solution is None else t + self.relaxed_solution.solve_time_s
 
 
 #: Default iteration budgets of the hard QP per solver.
@@ -115,12 +143,19 @@ class CBFQPController:
 
     which is always feasible; the run logs the event. If that fails too, u = 0.
 
+    Iteration budgets: a hard solve that runs out of ``max_iter`` is "max_iter", never
+    "solved", and goes to the fallback; its warm attempt and cold retry each get the budget
+    (``QPSolver.solve``). The relaxed QP has its own, larger budget ``relaxed_max_iter``,
+    so :attr:`CBFQPResult.iterations` is at most ``max_iter`` when the status is "solved"
+    and at most ``relaxed_max_iter`` when it is "relaxed".
+
     Args:
         n: joints; m: CBF rows.
         solver: "proxsuite" or "osqp".
         max_iter: iteration budget of each hard solve (bounds the time an infeasible QP
-            costs); None = the solver's default: 200 outer iterations for proxsuite,
-            10000 ADMM iterations for OSQP (its count is of much cheaper steps).
+            costs); None = the solver's default: 200 outer iterations (and at most 200
+            Newton steps in each) for proxsuite, 10000 ADMM iterations for OSQP (its count
+            is of much cheaper steps).
         slack_weight: rho. # ours: 1e4 makes a 1 mm/s violation cost like 0.1 rad/s of task error
     """
 
@@ -129,11 +164,13 @@ class CBFQPController:
         self.n, self.m = n, m
         if max_iter is None:
             max_iter = DEFAULT_MAX_ITER.get(solver, 200)
+        self.max_iter = max_iter
         self.hard = QPSolver(n, m, solver=solver, max_iter=max_iter)
         # Always feasible, used rarely: cold-started, with a larger budget (OSQP's ADMM
         # needs ~16000 iterations on it for m = 36 because of the slack weight's scale).
-        self.relaxed = (QPSolver(n + m, m, solver=solver, max_iter=max(40000 if solver == "osqp"
-                                 else 2000, 10 * max_iter), warm_start=False) if m else None)
+        self.relaxed_max_iter = max(40000 if solver == "osqp" else 2000, 10 * max_iter)
+        self.relaxed = (QPSolver(n + m, m, solver=solver, max_iter=self.relaxed_max_iter,
+                                 warm_start=False) if m else None)
         self.slack_weight = slack_weight
         self._u_inf = np.full(m, np.inf)
         self._u_inf.flags.writeable = False
@@ -166,7 +203,9 @@ class CBFQPController:
                 kappa = lower_multipliers(rs)
                 grad_L0 = float(np.linalg.norm(objective.g - ineq.A.T @ kappa))
                 return CBFQPResult(rs.x[:n], "relaxed", sol.status, kappa, grad_L0,
-                                   rs.x[n:], sol)
+                                   rs.x[n:], sol, rs)
+            return CBFQPResult(np.zeros(n), "failed", sol.status, np.zeros(m), float("nan"),
+                               np.zeros(m), sol, rs)
         return CBFQPResult(np.zeros(n), "failed", sol.status, np.zeros(m), float("nan"),
                            np.zeros(m), sol)
 

@@ -32,6 +32,20 @@ success with large KKT residuals, and non-finite data). OSQP certifies the infea
 CBF-QPs of two opposite sensors within ~50 iterations; proxsuite 0.8.0 did not certify any
 in our tests and runs to ``max_iter`` outer iterations (about 20-45 ms for ``max_iter=1000``
 with n = 7, m = 36, i.e. more than one 30 Hz period: lower ``max_iter`` if that matters).
+
+What counts as an iteration, and the budget ``max_iter`` (per attempt, see
+:meth:`QPSolver.solve`); a solve never reports ``"solved"`` with more than ``max_iter``:
+
+- proxsuite: one *outer* (proximal augmented-Lagrangian) iteration, ``info.iter_ext``,
+  capped by its ``settings.max_iter``. Each outer iteration runs an inner semi-smooth
+  Newton loop, capped by ``settings.max_iter_in`` (``QPSolver(max_iter_in=...)``, default
+  ``max_iter``; proxsuite's own default, 1500, let one solve of a nearly degenerate
+  CBF-QP take 276,099 Newton steps and 1.9 s). The Newton steps (proxsuite's
+  ``info.iter``, at most ``max_iter * (max_iter_in + 1)``) are reported separately as
+  ``inner_iterations``: they are the work, each a KKT solve.
+- OSQP: one ADMM iteration (``info.iter``; both stages of ``_OsqpBackend``, so at most
+  ``max_iter`` in all; the polishing solve is not counted). ``inner_iterations`` equals
+  ``iterations``.
 :meth:`QPSolver.solve` never raises for these: the controller applies its fallback. When
 the status is not ``"solved"``, ``x``, ``z`` and ``z_box`` are the backend's last iterate
 with non-finite entries replaced by 0; they must not be applied as a command.
@@ -46,7 +60,7 @@ from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
-from repro.errors import ReproError, UnknownChoiceError
+from repro.errors import ConfigError, ReproError, UnknownChoiceError
 
 SOLVERS: tuple[str, ...] = ("proxsuite", "osqp")
 """Valid values of ``QPSolver(solver=...)``."""
@@ -96,16 +110,20 @@ class QPSolution(NamedTuple):
         z: (m,) duals of the ``C`` rows (sign convention in the module docstring).
         z_box: (n,) duals of the box bounds.
         status: one of :data:`STATUSES`.
-        iterations: backend iterations. proxsuite: inner (Newton) iterations
-            ``info.iter``, several per outer ALM iteration, so it may exceed ``max_iter``,
-            which bounds the outer ones; OSQP: ADMM iterations (both stages, polishing
-            not counted), at most ``max_iter``. Summed over both attempts after a cold
-            retry (see :meth:`QPSolver.solve`).
+        iterations: iterations of the one backend attempt that produced ``x`` (the cold
+            retry when there was one), at most ``max_iter``; proxsuite: outer ALM
+            iterations, OSQP: ADMM iterations (see the module docstring).
         solve_time_s: wall time of the whole :meth:`QPSolver.solve` call [s], including
-            data transfer to the backend and the KKT check.
+            data transfer to the backend, both attempts and the KKT check.
         primal_residual: max bound violation of ``C x`` and ``x``, recomputed here on the
             unscaled problem (infinity norm).
         dual_residual: infinity norm of ``H x + g + C^T z + z_box``, recomputed here.
+        inner_iterations: proxsuite: Newton steps of that attempt (``info.iter``), at most
+            ``max_iter * (max_iter_in + 1)``; OSQP: equal to ``iterations``.
+        total_iterations: ``iterations`` summed over the attempts of this call (warm
+            attempt plus cold retry): the work of the call, at most ``2 * max_iter``.
+        attempts: backend attempts of this call: 0 (data rejected before the backend),
+            1, or 2 (a warm attempt that was not accepted, then a cold retry).
     """
 
     x: np.ndarray
@@ -116,6 +134,9 @@ class QPSolution(NamedTuple):
     solve_time_s: float
     primal_residual: float
     dual_residual: float
+    inner_iterations: int
+    total_iterations: int
+    attempts: int
 
 
 class _Dense(NamedTuple):
@@ -144,7 +165,8 @@ class _RawResult(NamedTuple):
     z: np.ndarray
     z_box: np.ndarray
     status: QPStatus
-    iterations: int
+    iterations: int  # outer (proxsuite) or ADMM (OSQP) iterations, <= max_iter
+    inner_iterations: int  # proxsuite: Newton steps; OSQP: = iterations
 
 
 def _vec(v: np.ndarray | None, size: int, fill: float, name: str) -> np.ndarray:
@@ -334,14 +356,22 @@ class _ProxsuiteBackend:
     initial-guess setting is written before ``init`` (writing it between ``init`` and the
     first ``solve`` segfaults proxsuite 0.8.0). ``results.z`` has length m + n with
     ``box_constraints=True``: the first m entries are the row duals, the last n the box duals.
+
+    proxsuite 0.8.0 (``dense/solver.hpp``) runs at most ``settings.max_iter`` outer
+    iterations, counted in ``info.iter_ext`` (reset by every ``solve``); each runs at most
+    ``settings.max_iter_in`` Newton steps and adds them (``max_iter_in + 1`` when it hits
+    that cap) to ``info.iter``. The status stays ``PROXQP_MAX_ITER_REACHED`` when the outer
+    loop runs out, so ``info.iter_ext <= max_iter`` always and ``== max_iter`` then.
     """
 
-    def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool) -> None:
+    def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool,
+                 max_iter_in: int) -> None:
         import proxsuite  # lazy: heavy import
 
         self._proxqp = proxsuite.proxqp
         self.n, self.m = n, m
         self.eps_abs, self.max_iter, self.warm_start = eps_abs, max_iter, warm_start
+        self.max_iter_in = max_iter_in
         self._qp: Any = None
 
     @property
@@ -361,7 +391,8 @@ class _ProxsuiteBackend:
         )
         qp.settings.eps_abs = self.eps_abs
         qp.settings.eps_rel = 0.0
-        qp.settings.max_iter = self.max_iter
+        qp.settings.max_iter = self.max_iter  # outer iterations (info.iter_ext)
+        qp.settings.max_iter_in = self.max_iter_in  # Newton steps per outer iteration
         qp.settings.verbose = False
         # Without the duality-gap check a cold "solved" can keep a complementarity
         # residual of ~4e-6 (u off by ~2e-6); with it, errors stay under 1e-8.
@@ -394,16 +425,18 @@ class _ProxsuiteBackend:
         x = np.array(res.x, dtype=float)
         z_all = np.array(res.z, dtype=float)
         m = self.m
+        outer, inner = int(info.iter_ext), int(info.iter)
         if (x.shape == (self.n,) and z_all.shape == (m + self.n,)
                 and np.isfinite(x).all() and np.isfinite(z_all).all()):
-            return _RawResult(x, z_all[:m], z_all[m:], status, int(info.iter))
+            return _RawResult(x, z_all[:m], z_all[m:], status, outer, inner)
         z_all = z_all.reshape(-1)
         return _RawResult(
             x=_finite_or_zero(x, self.n),
             z=_finite_or_zero(z_all[:m], m),
             z_box=_finite_or_zero(z_all[m:], self.n),
             status=status,
-            iterations=int(info.iter),
+            iterations=outer,
+            inner_iterations=inner,
         )
 
 
@@ -419,10 +452,13 @@ class _OsqpBackend:
     iterations to reach 1e-9 on these problems while its polishing step (an active-set
     solve of the reduced KKT system) is exact once ADMM has found the active set: ADMM runs
     to ``max(eps_abs, OSQP_ADMM_EPS)`` and is polished; only if polishing fails does ADMM
-    continue to ``eps_abs`` within the remaining iteration budget.
+    continue to ``eps_abs`` within the remaining iteration budget, so the ADMM iterations of
+    both stages add up to at most ``max_iter``.
     """
 
-    def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool) -> None:
+    def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool,
+                 max_iter_in: int) -> None:
+        del max_iter_in  # ADMM has no inner loop
         import osqp  # lazy: heavy import
 
         self._osqp = osqp
@@ -523,6 +559,7 @@ class _OsqpBackend:
             z_box=_finite_or_zero(None if y is None else y[self.m :], self.n),
             status=status,
             iterations=iterations,
+            inner_iterations=iterations,
         )
 
 
@@ -540,8 +577,12 @@ class QPSolver:
         m: number of rows of ``C`` (36 proximity-sensor rows in thomas2024); may be 0.
         solver: one of :data:`SOLVERS`.
         eps_abs: absolute tolerance handed to the backend (``eps_rel`` is 0).
-        max_iter: iteration budget per attempt; bounds the time spent on an infeasible
-            problem (proxsuite: outer ALM iterations; OSQP: ADMM iterations).
+        max_iter: iteration budget per attempt (proxsuite: outer ALM iterations; OSQP: ADMM
+            iterations, see the module docstring); bounds the time spent on an infeasible
+            problem. An attempt that runs out is ``"max_iter"``, never ``"solved"``.
+        max_iter_in: proxsuite only: Newton steps per outer iteration; None = ``max_iter``.
+            Together they bound the work of one attempt to ``max_iter * (max_iter_in + 1)``
+            Newton steps.
         warm_start: start each solve from the previous solution. The warm start is
             forgotten by :meth:`reset` and after any solve whose status is not ``"solved"``.
         kkt_tol: relative tolerance of the check applied to every backend "success"; see
@@ -549,6 +590,7 @@ class QPSolver:
 
     Raises:
         UnknownChoiceError: ``solver`` is not in :data:`SOLVERS`.
+        ConfigError: ``max_iter`` or ``max_iter_in`` is < 1.
     """
 
     def __init__(
@@ -560,16 +602,24 @@ class QPSolver:
         max_iter: int = 1000,
         warm_start: bool = True,
         kkt_tol: float = KKT_TOL,
+        max_iter_in: int | None = None,
     ) -> None:
         if solver not in _BACKENDS:
             raise UnknownChoiceError("QP solver", solver, SOLVERS)
         if n < 1 or m < 0:
             raise QPDimensionError(f"need n >= 1 and m >= 0, got n={n}, m={m}")
+        if max_iter_in is None:
+            max_iter_in = max_iter
+        for name, value in (("max_iter", max_iter), ("max_iter_in", max_iter_in)):
+            if int(value) != value or value < 1:
+                raise ConfigError(f"QP solver {name} must be an integer >= 1, got {value!r}")
         self.n, self.m, self.solver = int(n), int(m), solver
+        self.max_iter, self.max_iter_in = int(max_iter), int(max_iter_in)
         self.kkt_tol = float(kkt_tol)
         self.cold_retries = 0
         """How many warm solves failed the KKT check and were repeated cold (for logging)."""
-        self._backend = _BACKENDS[solver](self.n, self.m, eps_abs, max_iter, warm_start)
+        self._backend = _BACKENDS[solver](self.n, self.m, eps_abs, self.max_iter, warm_start,
+                                          self.max_iter_in)
 
     def reset(self) -> None:
         """Forget the warm start: the next solve starts cold (fresh backend state)."""
@@ -600,7 +650,8 @@ class QPSolver:
             problem: shapes (n, n), (n,), (m, n), (m,), (m,), (n,), (n,).
 
         Returns:
-            the solution; ``iterations`` sums both attempts when a cold retry happened.
+            the solution of the last attempt: ``x``, ``status`` and ``iterations`` all come
+            from it; ``total_iterations`` sums the attempts and ``solve_time_s`` covers them.
 
         Raises:
             QPDimensionError: a shape does not match ``(n, m)``.
@@ -608,6 +659,7 @@ class QPSolver:
         t0 = time.perf_counter()
         d = _as_dense(problem, self.n, self.m)
         k = self.m + self.n
+        attempts = total = 0
         if not np.isfinite(np.concatenate((d.H.ravel(), d.g, d.C.ravel()))).all():
             raw, status, kkt = self._trivial(d, "failed")
         elif not (d.bounds[:k] <= d.bounds[k:]).all():  # some l > u, or a NaN bound
@@ -616,14 +668,14 @@ class QPSolver:
         else:
             was_warm = self._backend.is_warm
             raw, status, kkt = self._attempt(d)
+            attempts, total = 1, raw.iterations
             # A warm start can also stall a solvable problem (proxsuite: max_iter, or a
             # false "infeasible") when the previous QP was very different: retry cold.
             if status != "solved" and was_warm:
                 self.cold_retries += 1
                 self._backend.reset()
-                first_iterations = raw.iterations
                 raw, status, kkt = self._attempt(d)
-                raw = raw._replace(iterations=raw.iterations + first_iterations)
+                attempts, total = 2, total + raw.iterations
         if status != "solved":
             self._backend.reset()  # never warm-start from a failed iterate
         return QPSolution(
@@ -635,20 +687,29 @@ class QPSolver:
             solve_time_s=time.perf_counter() - t0,
             primal_residual=kkt.primal_infeasibility,
             dual_residual=kkt.stationarity,
+            inner_iterations=raw.inner_iterations,
+            total_iterations=total,
+            attempts=attempts,
         )
 
     def _attempt(self, d: _Dense) -> tuple[_RawResult, QPStatus, _KKT]:
-        """One backend solve, its KKT residuals and its status after the KKT check."""
+        """One backend solve, its KKT residuals and its status after the KKT check.
+
+        A "solved" beyond the budget (no backend reports one; a guard on the counts above)
+        becomes "max_iter".
+        """
         raw = self._backend.solve(d)
         kkt = _kkt_full(d, raw.x, raw.z, raw.z_box)
         status = raw.status
-        if status == "solved" and not self._kkt_ok(kkt):
+        if status == "solved" and raw.iterations > self.max_iter:
+            status = "max_iter"
+        elif status == "solved" and not self._kkt_ok(kkt):
             status = "failed"
         return raw, status, kkt
 
     def _trivial(self, d: _Dense, status: QPStatus) -> tuple[_RawResult, QPStatus, _KKT]:
         """A zero result for data the backends are not given (non-finite, or ``l > u``)."""
-        raw = _RawResult(np.zeros(self.n), np.zeros(self.m), np.zeros(self.n), status, 0)
+        raw = _RawResult(np.zeros(self.n), np.zeros(self.m), np.zeros(self.n), status, 0, 0)
         with np.errstate(invalid="ignore"):
             kkt = _kkt_full(d, raw.x, raw.z, raw.z_box)
         return raw, status, kkt
