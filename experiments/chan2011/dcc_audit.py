@@ -70,8 +70,16 @@ def run(config: DCCAuditConfig, out_dir: Path) -> Path:
             scene.add_box(box.name, box.size, box.T_world, sc.OBSTACLE_RGBA)
         model = CollisionModel(crs_urdf_path(), CRS_JOINTS, sc.OBSTACLES)
         r = model.radii()
-        rec.set_scene({**scene.describe(), "dcc_radii_r_j": r, "columns_file": COLUMNS_FILE,
-                       "note": "no time: one trace row per random joint-space segment"})
+        desc = scene.describe()
+        robot = next(b for b in desc["bodies"] if b["kind"] == "urdf")
+        robot["q_columns"] = []  # no time axis: joints are the qi*/qf* columns of a segment
+        rec.set_scene({**desc, "dcc_radii_r_j": r, "columns_file": COLUMNS_FILE,
+                       "dcc_model": {"library": "python-fcl", "margin": model.margin,
+                                     "skip_links": [], "note": "d_i, d_f, dense_min_distance "
+                                     "are python-fcl distances on the URDF's collision "
+                                     "primitives; PyBullet's differ by ~1 mm"},
+                       "note": "no time axis: one trace row per random joint-space segment "
+                               "from (qi1..qi6) to (qf1..qf6)"})
         rng = np.random.default_rng(config.seed)
         lo, hi = np.asarray(CRS_LIMITS.q_min), np.asarray(CRS_LIMITS.q_max)
         # Segments start near the experiment's workspace: around the configurations

@@ -216,7 +216,17 @@ class RingSensor:
                 "radius": s.radius, "n_sensors": s.n_sensors, "max_range": s.max_range,
                 "min_range": s.min_range, "noise_std": s.noise_std, "theta0": s.theta0,
                 "sensor_axes_ring_frame": s.directions(), "ray_model": RAY_MODEL,
-                "columns": f"{self.prefix}d1..{self.prefix}d{s.n_sensors}"}
+                "ray_filter": {"collision_filter_mask": RAY_MASK,
+                               "robot_links_collision_group": ROBOT_GROUP,
+                               "robots_in_group": [self.robot.name],
+                               "pybullet": "p.setCollisionFilterGroupMask(robot, link, 4, -1) "
+                                           "for every link of those robots; rays use "
+                                           "collisionFilterMask"},
+                "column_prefix": self.prefix,
+                "columns": {"reading": [f"{self.prefix}d{i + 1}" for i in range(s.n_sensors)],
+                            "true_distance": [f"{self.prefix}dtrue{i + 1}"
+                                              for i in range(s.n_sensors)],
+                            "cbf": [f"{self.prefix}cbf{i + 1}" for i in range(s.n_sensors)]}}
 
 
 def exclude_from_rays(client: int, body: int) -> None:

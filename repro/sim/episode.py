@@ -73,7 +73,8 @@ class CameraRig:
         prefix: feature column prefix (``"s"`` gives ``s1_u``, ``s1_v``...).
         camera: intrinsics and mode (render + detection, or exact projection).
         robot: the robot carrying it.
-        frame: the robot frame the camera is fixed to (a pinocchio frame name).
+        frame: the robot link the camera is fixed to (a URDF link name, also a pinocchio
+            frame).
         T_frame_camera: true pose of the camera frame (x right, y down, z forward) in it.
         target: name of the scene's ``dot_target`` body.
         tol_px: a detection farther than this from the exact projection is an event [px].
@@ -448,6 +449,8 @@ def run_episode(ep: Episode, out_dir: Path, *, experiment: str, paper: str, conf
             desc = ep.scene.describe()
             desc["cameras"] = {c.name: {
                 "robot": c.robot.name, "frame": c.frame,
+                "frame_is": "a URDF link of the robot: camera pose = link frame pose @ "
+                            "T_frame_camera",
                 "T_frame_camera": pose_json(c.T_frame_camera),
                 "target": c.target, "feature_prefix": c.prefix, "mode": c.camera.mode,
                 "audit_tolerance_px": c.tol_px, **_camera_json(c.camera)} for c in ep.cameras}

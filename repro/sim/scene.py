@@ -238,6 +238,7 @@ class Scene:
                 "use_fixed_base": True,
                 "load_flags": {"names": list(URDF_LOAD_FLAGS), "value": robot.load_flags},
                 "joints": list(joints),
+                "column_prefix": column_prefix,
                 "q_columns": [f"{column_prefix}q{i + 1}" for i in range(n)],
                 "joint_limits": {"q_min": limits.q_min, "q_max": limits.q_max,
                                  "qd_max": limits.qd_max, "tau_max": limits.tau_max},
