@@ -166,8 +166,9 @@ def prepare_config(exp: Experiment, overrides: Sequence[str], video: bool = Fals
 def default_out_dir(exp: Experiment, results_dir: Path, config: Any) -> Path:
     """``<results>/<paper>/<name>``, or ``<name>__<short config hash>`` for a non-default config.
 
-    Any override that changes the config (including ``--video``) gets its own
-    directory, so the default traces are never overwritten by a variant.
+    Any override that changes the config gets its own directory, so the default traces are
+    never overwritten by a variant; ``--video`` is output-only (same trace, plus video.gif)
+    and keeps the default directory.
     """
     base = registry.experiment_dir(results_dir, exp)
     digest = registry.compute_config_hash(config)

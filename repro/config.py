@@ -56,6 +56,7 @@ def param(
     range: Range | None = None,
     choices: tuple[str, ...] | None = None,
     help: str = "",
+    output_only: bool = False,
 ) -> Any:
     """A ``dataclasses.field`` with ``default`` and metadata unit/range/choices/help.
 
@@ -77,6 +78,9 @@ def param(
         metadata["choices"] = choices
     if help:
         metadata["help"] = help
+    if output_only:
+        # Changes what a run writes (a video...), not its trace: left out of the config hash.
+        metadata["output_only"] = True
     _check_value("default", default, metadata)
 
     if isinstance(default, (list, dict, set, tuple)) or type(default).__hash__ is None:

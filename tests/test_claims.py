@@ -161,3 +161,21 @@ def test_evaluated_table_writes_and_reads_back(results: Path) -> None:
 
 def test_natural_key() -> None:
     assert sorted(["10", "2", "1b", "1", "1a"], key=natural_key) == ["1", "1a", "1b", "2", "10"]
+
+
+def test_audit_note_names_wrong_and_hidden_features() -> None:
+    import pandas as pd
+
+    from repro.runs.claims import audit_note
+    from repro.runs.trace import RunFiles
+
+    def run(audit: dict) -> RunFiles:
+        return RunFiles(pd.DataFrame(), pd.DataFrame(), {"summary": {"audit": audit}}, {})
+
+    clean = {"camera": {"mismatch_rows": 0, "hidden_found_rows": 0}}
+    assert audit_note({"a": run(clean)}) == ""
+    bad = {"camera": {"mismatch_rows": 250, "points_mismatched": [2], "max_err_px": 322.0,
+                      "hidden_found_rows": 14, "points_hidden_found": [3]}}
+    note = audit_note({"a": run(clean), "experiment": run(bad)})
+    assert "experiment" in note and "[2]" in note and "250 rows" in note and "322.0" in note
+    assert "hidden" in note and "14 rows" in note

@@ -47,7 +47,8 @@ class Chan2011Config:
     snapshot_period: float = param(0.0, unit="s", range=(0.0, None),
                                    help="save camera and scene images every ... s (0: none)")
     seed: int = param(0, range=(0, None), help="seed (no random element yet)")
-    video: bool = param(False, help="also write an animated GIF")
+    video: bool = param(False, help="also write an animated GIF of the run (video.gif)",
+                        output_only=True)
 
 
 @dataclass(frozen=True)

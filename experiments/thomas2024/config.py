@@ -56,7 +56,8 @@ class Thomas2024Config:
     qp_max_iter: int = param(200, range=(1, 100000),
                              help="iteration budget per QP solve")  # ours: bounds an infeasible solve to ~2 ms
     seed: int = param(0, range=(0, None), help="seed of the sensor noise")
-    video: bool = param(False, help="also write an animated GIF of the run")
+    video: bool = param(False, help="also write an animated GIF of the run (video.gif)",
+                        output_only=True)
 
 
 # Per-experiment defaults (thomas2024 Sec. V, table of cases in shared/papers/README.md).

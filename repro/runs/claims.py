@@ -11,7 +11,7 @@ from __future__ import annotations
 import csv
 import os
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -157,8 +157,27 @@ def evaluate_claims(claims: Sequence[Claim], results_dir: Path) -> pd.DataFrame:
             message = f"check returned {type(result).__name__}, not ClaimResult"
             rows.append(_row(claim, message, "not_run"))
             continue
-        rows.append(_row(claim, result.measured, result.status))
+        rows.append(_row(claim, result.measured + audit_note(runs), result.status))
     return pd.DataFrame(rows, columns=list(CLAIMS_COLUMNS), dtype=object)
+
+
+def audit_note(runs: Mapping[str, RunFiles]) -> str:
+    """A warning for the claim's ``measured`` text when a run's camera audit (manifest
+    ``summary.audit``) found that the controller used a wrong feature (a detection more
+    than the tolerance from its model point's projection) or a hidden point reported found.
+    Empty when every audit is clean."""
+    notes = []
+    for name, run in runs.items():
+        audit = (run.manifest.get("summary") or {}).get("audit") or {}
+        for cam, a in audit.items():
+            if a.get("mismatch_rows"):
+                notes.append(f"{name}: {cam} points {a.get('points_mismatched')} detected "
+                             f"> tolerance from their projection in {a['mismatch_rows']} rows "
+                             f"(max {a.get('max_err_px', float('nan')):.1f} px)")
+            if a.get("hidden_found_rows"):
+                notes.append(f"{name}: {cam} points {a.get('points_hidden_found')} reported "
+                             f"found while hidden in {a['hidden_found_rows']} rows")
+    return (" [AUDIT: " + "; ".join(notes) + "]") if notes else ""
 
 
 def natural_key(text: str) -> tuple[tuple[int, int | str], ...]:

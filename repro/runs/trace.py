@@ -188,9 +188,13 @@ def config_hash(config: Any) -> str:
 
     ``config`` is a dataclass instance or a mapping. Canonical JSON: :func:`to_jsonable`,
     sorted keys, no whitespace, ASCII. Field order and tuple-vs-list do not change the hash;
-    any value change does. The class name is not part of the hash.
+    any value change does, except in fields declared ``output_only`` (e.g. ``video``: it
+    changes which files a run writes, not its trace). The class name is not part of the hash.
     """
     _check_config(config)
+    if dataclasses.is_dataclass(config) and not isinstance(config, type):
+        config = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)
+                  if not f.metadata.get("output_only")}
     return hashlib.sha256(_canonical_json(config).encode("ascii")).hexdigest()
 
 
