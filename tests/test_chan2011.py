@@ -17,7 +17,7 @@ from experiments.chan2011 import claims as cl
 from experiments.chan2011 import scene as sc
 from experiments.chan2011.dcc_audit import DCCAuditConfig
 from repro.control.interpolation import quintic
-from repro.control.nmpc import CameraModel, NMPCConfig, VisualNMPC
+from repro.control.nmpc import NMPCConfig, VisualNMPC
 from repro.runs.trace import RunFiles, load_run
 from repro.sensors.camera import (
     project_points,
@@ -64,7 +64,7 @@ def test_short_run_matches_reference(name: str, tmp_path: Path) -> None:
 def test_nmpc_commands_respect_every_bound(tmp_path: Path) -> None:
     got = short_run("experiment", tmp_path / "exp")
     df = got.trace
-    qd_max = np.asarray(got.scene["joint_limits"]["qd_max_used"])
+    qd_max = np.asarray(got.scene["controller_model"]["qd_max_used"])
     u = df[[f"u{i}" for i in range(1, 7)]].to_numpy(float)
     assert np.all(np.abs(u) <= qd_max + 1e-6)
     q = df[[f"q{i}" for i in range(1, 7)]].to_numpy(float)
@@ -98,8 +98,8 @@ def test_ten_colour_conrod_detected_at_its_image_centroids() -> None:
 def test_image_jacobian_through_crs_kinematics_matches_finite_differences() -> None:
     model = pin.buildModelFromUrdf(str(crs_urdf_path()))
     fk = frame_pose_casadi(model, "flange", CRS_JOINTS, T_frame_child=T_FLANGE_CAMERA)
-    nmpc = VisualNMPC(fk, CameraModel(**sc.TABLE_I), 10, CRS_LIMITS.q_min, CRS_LIMITS.q_max,
-                      np.ones(6), NMPCConfig())
+    nmpc = VisualNMPC(fk, sc.CONTROLLER_INTRINSICS, 10, CRS_LIMITS.q_min, CRS_LIMITS.q_max,
+                      np.ones(6), NMPCConfig(), image_bounds=sc.CONTROLLER_IMAGE_BOUNDS)
     st = sc.SETTINGS["simulation"]
     rng = np.random.default_rng(3)
     for q in [np.deg2rad(st.q0_deg)] + [rng.uniform(-1, 1, 6) for _ in range(3)]:
@@ -115,18 +115,16 @@ def test_image_jacobian_through_crs_kinematics_matches_finite_differences() -> N
 def test_predicted_pixels_match_exact_projection_with_table_i_camera() -> None:
     model = pin.buildModelFromUrdf(str(crs_urdf_path()))
     fk = frame_pose_casadi(model, "flange", CRS_JOINTS, T_frame_child=T_FLANGE_CAMERA)
-    cam = CameraModel(**sc.TABLE_I)
-    nmpc = VisualNMPC(fk, cam, 10, CRS_LIMITS.q_min, CRS_LIMITS.q_max, np.ones(6))
+    intr = sc.CONTROLLER_INTRINSICS
+    nmpc = VisualNMPC(fk, intr, 10, CRS_LIMITS.q_min, CRS_LIMITS.q_max, np.ones(6),
+                      image_bounds=sc.CONTROLLER_IMAGE_BOUNDS)
     st = sc.SETTINGS["simulation"]
     q = np.deg2rad(st.q0_deg)
-    from repro.sensors.camera import Intrinsics
     from repro.sim.robot import Robot
 
     with World() as w:
         robot = Robot(w, crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
         T = robot.frame_pose("flange", q) @ T_FLANGE_CAMERA
-    K = cam.matrix()
-    intr = Intrinsics(1024, 768, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
     uv, _ = project_points(intr, T, sc.CONROD.points_world(st.T_object_estimate))
     np.testing.assert_allclose(nmpc.predict_pixels(q, st.T_object_estimate, sc.CONROD_POINTS),
                                uv.ravel(), atol=1e-8)
@@ -155,8 +153,8 @@ def _fake_run(u_scale: float, lost: bool) -> RunFiles:
     for j in range(1, 11):
         data[f"p{j}_u"] = np.full(n, 500.0)
         data[f"p{j}_v"] = np.full(n, 400.0)
-    scene = {"joint_limits": {"q_min": [-1] * 6, "q_max": [1] * 6, "qd_max_used": [1] * 6},
-             "camera_controller": {"table_I": sc.TABLE_I}}
+    scene = {"bodies": [{"kind": "urdf", "joint_limits": {"q_min": [-1] * 6, "q_max": [1] * 6}}],
+             "controller_model": {"table_I": sc.TABLE_I, "qd_max_used": [1] * 6}}
     return RunFiles(pd.DataFrame(data), pd.DataFrame(), {}, json.loads(json.dumps(scene)))
 
 

@@ -15,14 +15,16 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from repro.control.nmpc import CameraModel, NMPCConfig, VisualNMPC
+from repro.control.nmpc import NMPCConfig, VisualNMPC
 from repro.errors import ConfigError, UnknownChoiceError
+from repro.sensors.camera import ImageBounds, Intrinsics, project_points
 from repro.sim.casadi_kinematics import frame_pose_casadi
 from repro.sim.panda import PANDA_JOINTS, PANDA_LIMITS, build_panda_urdf
 
 #: chan2011 Table I (uncalibrated camera parameters of the Sony XC-HR70 + 4.8 mm lens).
-TABLE_I = CameraModel(f=0.0048, ku=1 / 4.65e-6, kv=1 / 4.65e-6, u0=512.0, v0=384.0,
-                      beta=math.pi / 2, u_min=1.0, u_max=1023.0, v_min=1.0, v_max=767.0)
+TABLE_I = Intrinsics.from_pixel_pitch(f=0.0048, ku=1 / 4.65e-6, kv=1 / 4.65e-6, u0=512.0,
+                                      v0=384.0, width=1024, height=768, beta=math.pi / 2)
+TABLE_I_BOUNDS = ImageBounds(1.0, 1023.0, 1.0, 767.0)
 #: A Panda configuration with the flange pointing down.
 Q_HOME = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.785])
 N_POINTS = 10
@@ -61,7 +63,7 @@ def _object_in_view(fk: ca.Function, q: np.ndarray, rng: np.random.Generator,
                     ) -> np.ndarray:
     """T_base_object with its origin on the ray of ``pixel`` at ``depth`` [m], random tilt."""
     T_bc = np.array(fk(q))
-    C = TABLE_I.matrix()
+    C = TABLE_I.K()
     ray = np.linalg.solve(C, [pixel[0], pixel[1], 1.0])
     T_co = np.eye(4)
     T_co[:3, :3] = pin.exp3(rng.normal(0.0, 0.3, 3))
@@ -71,7 +73,8 @@ def _object_in_view(fk: ca.Function, q: np.ndarray, rng: np.random.Generator,
 
 def _nmpc(fk: ca.Function, **kw: object) -> VisualNMPC:
     return VisualNMPC(fk, TABLE_I, N_POINTS, PANDA_LIMITS.q_min, PANDA_LIMITS.q_max,
-                      PANDA_LIMITS.qd_max, NMPCConfig(**kw))  # type: ignore[arg-type]
+                      PANDA_LIMITS.qd_max, NMPCConfig(**kw),  # type: ignore[arg-type]
+                      image_bounds=TABLE_I_BOUNDS)
 
 
 # ------------------------------------------------------------- casadi kinematics
@@ -153,40 +156,59 @@ def test_casadi_fk_rejects_bad_chains(panda_model: pin.Model) -> None:
 
 # ----------------------------------------------------------------- camera model
 def test_camera_matrix_no_skew_and_skew() -> None:
-    C = TABLE_I.matrix()
+    """chan2011 eq. (1) through Intrinsics.from_pixel_pitch: exact zero skew at beta = 90 deg."""
+    C = TABLE_I.K()
     fku = 0.0048 / 4.65e-6
     np.testing.assert_array_equal(C[0, 1], 0.0)
     np.testing.assert_allclose(C, np.array([[fku, 0, 512], [0, fku, 384], [0, 0, 1]]),
                                rtol=1e-15)
     beta = math.radians(80.0)
-    cam = CameraModel(f=0.004, ku=2.0e5, kv=2.5e5, u0=300.0, v0=200.0, beta=beta,
-                      u_min=0, u_max=640, v_min=0, v_max=480)
+    cam = Intrinsics.from_pixel_pitch(f=0.004, ku=2.0e5, kv=2.5e5, u0=300.0, v0=200.0,
+                                      width=640, height=480, beta=beta)
     expected = [[800.0, 800.0 / math.tan(beta), 300.0],
                 [0.0, 1000.0 / math.sin(beta), 200.0], [0.0, 0.0, 1.0]]
-    np.testing.assert_allclose(cam.matrix(), expected, rtol=1e-14)
-    assert cam.matrix()[0, 1] > 100.0  # cot(80 deg) * 800 = 141 px
+    np.testing.assert_allclose(cam.K(), expected, rtol=1e-14)
+    assert cam.K()[0, 1] > 100.0  # cot(80 deg) * 800 = 141 px
     with pytest.raises(ConfigError):
-        CameraModel(f=0.004, ku=2e5, kv=2e5, u0=0, v0=0, beta=0.0, u_min=0, u_max=1,
-                    v_min=0, v_max=1)
+        Intrinsics.from_pixel_pitch(f=0.004, ku=2e5, kv=2e5, u0=0, v0=0, width=1, height=1,
+                                    beta=0.0)
+
+
+def test_image_bounds_are_required_and_validated(fk_camera: ca.Function) -> None:
+    """FOV bounds: given explicitly (no silent default), never empty."""
+    full = VisualNMPC(fk_camera, TABLE_I, 2, PANDA_LIMITS.q_min, PANDA_LIMITS.q_max,
+                      PANDA_LIMITS.qd_max, image_bounds=TABLE_I.image_bounds())
+    assert full.image_bounds == (-0.5, 1023.5, -0.5, 767.5)
+    assert _nmpc(fk_camera).image_bounds == TABLE_I_BOUNDS
+    with pytest.raises(TypeError, match="image_bounds"):
+        VisualNMPC(fk_camera, TABLE_I, 2, PANDA_LIMITS.q_min,  # type: ignore[call-arg]
+                   PANDA_LIMITS.q_max, PANDA_LIMITS.qd_max)
+    with pytest.raises(ConfigError, match="empty field of view"):
+        VisualNMPC(fk_camera, TABLE_I, 2, PANDA_LIMITS.q_min, PANDA_LIMITS.q_max,
+                   PANDA_LIMITS.qd_max, image_bounds=ImageBounds(10.0, 5.0, 0.0, 1.0))
 
 
 def test_predict_pixels_matches_projection_with_skew(fk_camera: ca.Function) -> None:
-    """p(q) of the NMPC = C [I|0] cT_b bT_o oP computed with numpy (eq. (2))."""
+    """p(q) of the NMPC = C [I|0] cT_b bT_o oP computed with numpy (eq. (2)), and = the
+    library's project_points with the same (skewed) Intrinsics."""
     rng = np.random.default_rng(5)
-    cam = CameraModel(f=0.004, ku=2.0e5, kv=2.5e5, u0=300.0, v0=200.0,
-                      beta=math.radians(75.0), u_min=0, u_max=640, v_min=0, v_max=480)
+    cam = Intrinsics.from_pixel_pitch(f=0.004, ku=2.0e5, kv=2.5e5, u0=300.0, v0=200.0,
+                                      width=640, height=480, beta=math.radians(75.0))
     ctrl = VisualNMPC(fk_camera, cam, N_POINTS, PANDA_LIMITS.q_min, PANDA_LIMITS.q_max,
-                      PANDA_LIMITS.qd_max, NMPCConfig())
+                      PANDA_LIMITS.qd_max, NMPCConfig(), image_bounds=cam.image_bounds())
     pts = _object_points(rng)
     for _ in range(5):
         q = Q_HOME + rng.normal(0, 0.2, 7)
         T_bo = _object_in_view(fk_camera, q, rng)
         T_cb = np.linalg.inv(np.array(fk_camera(q)))
         P_c = (T_cb @ T_bo @ np.c_[pts, np.ones(N_POINTS)].T)[:3]
-        uvw = cam.matrix() @ P_c
+        uvw = cam.K() @ P_c
         expected = (uvw[:2] / uvw[2]).T.ravel()
         np.testing.assert_allclose(ctrl.predict_pixels(q, T_bo, pts), expected, rtol=1e-12)
         np.testing.assert_allclose(ctrl.predict_depths(q, T_bo, pts), P_c[2], rtol=1e-12)
+        uv, _ = project_points(cam, np.array(fk_camera(q)), (T_bo @ np.c_[pts, np.ones(
+            N_POINTS)].T)[:3].T)
+        np.testing.assert_allclose(ctrl.predict_pixels(q, T_bo, pts), uv.ravel(), rtol=1e-12)
 
 
 def test_image_jacobian_matches_finite_differences(fk_camera: ca.Function) -> None:
@@ -238,12 +260,12 @@ def test_linear_model_matches_closed_form(Np: int, solver: str, qpsol: str, tol:
     (dt^2 S_2 J^T Q J + (Np - 1) W) qdot = -dt S_1 J^T Q e_0,  S_1 = sum i, S_2 = sum i^2.
     """
     rng = np.random.default_rng(8)
-    cam = CameraModel(f=1.0, ku=600.0, kv=500.0, u0=320.0, v0=240.0, beta=math.pi / 2,
-                      u_min=-1e6, u_max=1e6, v_min=-1e6, v_max=1e6)
+    cam = Intrinsics(640, 480, fu=600.0, fv=500.0, u0=320.0, v0=240.0)
+    no_fov = ImageBounds(-1e6, 1e6, -1e6, 1e6)
     n_pts, dt, Qw, Ww = 4, 0.05, 2.0, 1e-3
     cfg = NMPCConfig(Np=Np, dt=dt, Q_weight=Qw, W_weight=Ww, solver=solver, qpsol=qpsol)
     ctrl = VisualNMPC(_translating_camera(), cam, n_pts, [-10.0] * 2, [10.0] * 2,
-                      [100.0] * 2, cfg)
+                      [100.0] * 2, cfg, image_bounds=no_fov)
     pts = np.c_[rng.uniform(-0.1, 0.1, (n_pts, 2)), rng.uniform(0.4, 0.8, n_pts)]
     T_bo = np.eye(4)
     q_k = np.array([0.01, -0.02])
@@ -312,7 +334,7 @@ def test_unconstrained_solution_is_stationary(fk_camera: ca.Function) -> None:
 def _check_bounds(ctrl: VisualNMPC, sol: object, q_lo: np.ndarray, q_hi: np.ndarray,
                   qd_lo: np.ndarray, qd_hi: np.ndarray, T_bo: np.ndarray, pts: np.ndarray,
                   tol: float = 1e-6) -> None:
-    cam, m = ctrl.camera, ctrl.config.fov_margin
+    cam, m = ctrl.image_bounds, ctrl.config.fov_margin
     qdot, q_pred, p_pred = sol.qdot, sol.q_pred, sol.p_pred  # type: ignore[attr-defined]
     assert np.all(qdot >= qd_lo - tol) and np.all(qdot <= qd_hi + tol)
     np.testing.assert_allclose(q_pred[0] + np.arange(ctrl.config.Np)[:, None]

@@ -12,7 +12,7 @@ import pinocchio as pin
 
 from experiments.chan2011 import scene as sc
 from repro.bench import timing_row
-from repro.control.nmpc import CameraModel, NMPCConfig, VisualNMPC
+from repro.control.nmpc import NMPCConfig, VisualNMPC
 from repro.planning.dcc import CollisionModel
 from repro.sim.casadi_kinematics import frame_pose_casadi
 from repro.sim.crs_a465 import (
@@ -33,7 +33,6 @@ def bench(results_dir: Path) -> list[dict[str, object]]:
     rows: list[dict[str, object]] = []
     model = pin.buildModelFromUrdf(str(crs_urdf_path()))
     fk = frame_pose_casadi(model, "flange", CRS_JOINTS, T_frame_child=T_FLANGE_CAMERA)
-    cam = CameraModel(**sc.TABLE_I)
     for name, Np, dt, W, frac in CASES:
         trace = Path(results_dir) / "chan2011" / name / "trace.csv"
         if not trace.exists():
@@ -46,9 +45,10 @@ def bench(results_dir: Path) -> list[dict[str, object]]:
             "desired_pixels"], float).ravel()
         states = df.iloc[:: max(1, len(df) // 200)]
         for mode in ("warm", "cold"):
-            nmpc = VisualNMPC(fk, cam, sc.N_POINTS, CRS_LIMITS.q_min, CRS_LIMITS.q_max,
-                              velocity_limits(frac), NMPCConfig(Np=Np, dt=dt, W_weight=W,
-                                                                max_iter=100))
+            nmpc = VisualNMPC(fk, sc.CONTROLLER_INTRINSICS, sc.N_POINTS, CRS_LIMITS.q_min,
+                              CRS_LIMITS.q_max, velocity_limits(frac),
+                              NMPCConfig(Np=Np, dt=dt, W_weight=W, max_iter=100),
+                              image_bounds=sc.CONTROLLER_IMAGE_BOUNDS)
             times = []
             for _, row in states.iterrows():
                 q = row[[f"q{i}" for i in range(1, 7)]].to_numpy(float)

@@ -203,7 +203,8 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
         nmpc = VisualNMPC(fk, sc.CONTROLLER_INTRINSICS, N, CRS_LIMITS.q_min, CRS_LIMITS.q_max,
                           qd_max, NMPCConfig(Np=config.Np, dt=config.dt, Q_weight=config.Q_weight,
                                              W_weight=config.W_weight, solver=config.nlp_solver,
-                                             qpsol=config.qpsol, max_iter=config.nlp_max_iter))
+                                             qpsol=config.qpsol, max_iter=config.nlp_max_iter),
+                          image_bounds=sc.CONTROLLER_IMAGE_BOUNDS)
     dcc = CollisionModel(robot.urdf_path, CRS_JOINTS, setting.obstacles) if config.dcc else None
     robot.reset(np.deg2rad(setting.q0_deg))
     ctrl = Chan2011Controller(config, robot, setting, uv_d.ravel(), nmpc, dcc)

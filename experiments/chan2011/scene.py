@@ -17,7 +17,7 @@ import numpy as np
 
 from repro.geometry import Rx, Ry, Rz, trans
 from repro.planning.dcc import Box
-from repro.sensors.camera import DotTarget, Intrinsics
+from repro.sensors.camera import DotTarget, ImageBounds, Intrinsics, check_scene_colors
 
 DEG = np.pi / 180.0
 
@@ -27,6 +27,13 @@ TABLE_I = {  # chan2011 Table I: uncalibrated parameters used by the controller
     "f": 0.0048, "ku": 1.0 / 4.65e-6, "kv": 1.0 / 4.65e-6, "u0": 512.0, "v0": 384.0,
     "beta": np.pi / 2, "u_min": 1.0, "u_max": 1023.0, "v_min": 1.0, "v_max": 767.0,
 }
+# The controller's camera model (chan2011 eq. (1) with Table I): fu = fv = f ku = 1032.3 px,
+# no skew (beta = 90 deg), and the FOV bounds of eqs. (6)-(7).
+CONTROLLER_INTRINSICS = Intrinsics.from_pixel_pitch(
+    f=TABLE_I["f"], ku=TABLE_I["ku"], kv=TABLE_I["kv"], u0=TABLE_I["u0"], v0=TABLE_I["v0"],
+    width=IMAGE_W, height=IMAGE_H, beta=TABLE_I["beta"])
+CONTROLLER_IMAGE_BOUNDS = ImageBounds(TABLE_I["u_min"], TABLE_I["u_max"], TABLE_I["v_min"],
+                                      TABLE_I["v_max"])
 # The simulated ("real") camera differs from Table I, so the controller really works
 # uncalibrated: 3 % longer focal length, unequal pixel pitch, principal point off by ~9 px.
 TRUE_INTRINSICS = Intrinsics(width=IMAGE_W, height=IMAGE_H, fu=1063.0, fv=1058.0,
@@ -43,7 +50,9 @@ CONROD_PARTS = (  # (shape, size, centre in the target frame)
 )  # ours: the beam runs along -x of the object frame, away from the books at Rz(135 deg)
 # Ten feature points on three heights (non-coplanar): four on the big end's face,
 # three on the beam, three on the small end (ours: the paper gives no coordinates).
-# Each dot is a 0.2 mm disc standing 0.3 mm proud of its face (no z-fighting in the render).
+# Each dot is a flat disc (DotTarget) 0.3 mm proud of its face (no z-fighting in the render).
+# Draw the cylinders with repro.sensors.camera.cylinder_visual_shape: TinyRenderer draws
+# p.GEOM_CYLINDER 1 mm fat all round, which would bury these dots.
 _PROUD = 0.0003
 _BIG = [(0.024 * np.cos(a), 0.024 * np.sin(a), 0.030 + _PROUD)
         for a in np.deg2rad([45, 135, 225, 315])]
@@ -64,6 +73,21 @@ def _hue_colors(n: int) -> tuple[tuple[int, int, int], ...]:
 
 CONROD = DotTarget(points_target=CONROD_POINTS, colors=_hue_colors(N_POINTS),
                    dot_radius=0.004, plate_size=None, hue_tolerance=8)  # ours: 8 mm dots
+
+# --------------------------------------------------------------- body colours
+# The ten dot hues go all round the hue circle (36 deg apart, detection window +-16 deg), so
+# every other body the camera sees must be desaturated (HSV saturation < 90/255), or it
+# could pass a dot's colour mask (the brown (0.7, 0.55, 0.35) books of the first runs, S =
+# 128/255, hue 34 deg, were taken for the orange dot p2). check_scene_colors below enforces it.
+OBSTACLE_RGBA = (0.66, 0.62, 0.56, 1.0)  # ours: books, binder and pliers, a greyish beige (S = 39/255)
+CONROD_RGBA = (0.45, 0.45, 0.50, 1.0)  # ours: steel grey (S = 26/255)
+# Every body of the chan2011 scenes other than the dots (the robot is not in the render
+# world: the camera does not see it).
+SCENE_RGBA: dict[str, tuple[float, float, float, float]] = {
+    "textbook1": OBSTACLE_RGBA, "textbook2": OBSTACLE_RGBA, "binder": OBSTACLE_RGBA,
+    "pliers": OBSTACLE_RGBA, "conrod": CONROD_RGBA,
+}
+check_scene_colors(CONROD, SCENE_RGBA)  # raises at import if a body could be taken for a dot
 
 
 # --------------------------------------------------------------- settings

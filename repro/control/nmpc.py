@@ -18,8 +18,10 @@ Model (chan2011 eqs. (1)-(3), (9)):
     {}^cT_b(q) = ({}^bT_c(q))^{-1}
 
 with :math:`{}^bT_c(q)` given by ``fk_camera`` (pose of the camera frame in the base frame,
-camera frame x right, y down, z forward, as :mod:`repro.sensors.camera`) and the pixel
-vector :math:`\bar p = (u_1, v_1, \dots, u_N, v_N)` (eq. (3)).
+camera frame x right, y down, z forward, as :mod:`repro.sensors.camera`), the camera
+matrix :math:`C` of eq. (1) = ``intrinsics.K()`` (a :class:`repro.sensors.camera.Intrinsics`;
+:meth:`~repro.sensors.camera.Intrinsics.from_pixel_pitch` builds it from f, k_u, k_v,
+u_0, v_0, beta) and the pixel vector :math:`\bar p = (u_1, v_1, \dots, u_N, v_N)` (eq. (3)).
 
 Problem solved at step k (eqs. (10), (12), constraints (4)-(7)), decision variable
 :math:`\dot q \in \mathbb{R}^n`:
@@ -35,7 +37,8 @@ Problem solved at step k (eqs. (10), (12), constraints (4)-(7)), decision variab
     u^{\min} + m \le u_j \le u^{\max} - m, \quad v^{\min} + m \le v_j \le v^{\max} - m, \quad
     Z_j(q_{k+i|k}) \ge Z_{\min}
 
-for :math:`i = 1..N_p-1` and every point j (:math:`m` = ``fov_margin``). ``q_lo, q_hi`` are
+for :math:`i = 1..N_p-1` and every point j (:math:`m` = ``fov_margin``; the bounds
+:math:`u^{\min}, \dots` are the ``image_bounds`` given to :class:`VisualNMPC`). ``q_lo, q_hi`` are
 the joint limits (4), or the DCC collision-free hyper-rectangle (chan2011 eq. (20)) that
 replaces (8). The FOV rows apply to the corrected prediction :math:`\bar p(q) + d_k` (the
 best estimate of what the camera will see) unless ``NMPCConfig.fov_on_corrected`` is False.
@@ -92,6 +95,7 @@ import casadi as ca
 import numpy as np
 
 from repro.errors import ConfigError, UnknownChoiceError
+from repro.sensors.camera import ImageBounds, Intrinsics
 
 #: Valid ``NMPCConfig.solver`` values.
 SOLVERS: tuple[str, ...] = ("sqp", "ipopt")
@@ -107,63 +111,6 @@ _QUIET_QPSOL: dict[str, dict[str, Any]] = {
     "qrqp": {"print_iter": False, "print_header": False, "print_info": False},
     "highs": {"highs": {"output_flag": False}},
 }
-
-
-@dataclass(frozen=True)
-class CameraModel:
-    r"""Pinhole camera of chan2011 eq. (1) and its field of view (6)-(7).
-
-    .. math::
-
-        C = \begin{bmatrix} f k_u & f k_u \cot\beta & u_0 \\
-                            0 & f k_v / \sin\beta & v_0 \\ 0 & 0 & 1 \end{bmatrix}
-
-    Attributes:
-        f: focal length [m].
-        ku, kv: pixels per unit length along x and y of the sensor [px/m].
-        u0, v0: principal point [px].
-        beta: skew angle between the sensor axes [rad] (pi/2: no skew).
-        u_min, u_max, v_min, v_max: image bounds used by the FOV constraints [px].
-    """
-
-    f: float
-    ku: float
-    kv: float
-    u0: float
-    v0: float
-    beta: float
-    u_min: float
-    u_max: float
-    v_min: float
-    v_max: float
-
-    def __post_init__(self) -> None:
-        if not (self.f > 0 and self.ku > 0 and self.kv > 0):
-            raise ConfigError(f"need f, ku, kv > 0, got f={self.f}, ku={self.ku}, kv={self.kv}")
-        if not 0.0 < self.beta < math.pi:
-            raise ConfigError(f"skew angle beta must be in (0, pi) rad, got {self.beta}")
-        if not (self.u_min < self.u_max and self.v_min < self.v_max):
-            raise ConfigError(f"empty field of view: u in [{self.u_min}, {self.u_max}], "
-                              f"v in [{self.v_min}, {self.v_max}]")
-
-    def matrix(self) -> np.ndarray:
-        """3x3 camera matrix C of chan2011 eq. (1) [px/m-normalised -> px]."""
-        fu, fv = self.f * self.ku, self.f * self.kv
-        # cot(pi/2) is 6e-17 in floating point; make the no-skew case exact.
-        skew = 0.0 if self.beta == math.pi / 2 else fu / math.tan(self.beta)
-        return np.array([
-            [fu, skew, self.u0],
-            [0.0, fv / math.sin(self.beta), self.v0],
-            [0.0, 0.0, 1.0],
-        ])
-
-    @classmethod
-    def from_intrinsics(cls, intr: Any) -> CameraModel:
-        """The model of a :class:`repro.sensors.camera.Intrinsics` (no skew, f = 1 m nominal,
-        ku = fu, kv = fv [px/m]); FOV = the whole image, u in [-1/2, W - 1/2] [px] etc."""
-        return cls(f=1.0, ku=float(intr.fu), kv=float(intr.fv), u0=float(intr.u0),
-                   v0=float(intr.v0), beta=math.pi / 2, u_min=-0.5, u_max=intr.width - 0.5,
-                   v_min=-0.5, v_max=intr.height - 0.5)
 
 
 @dataclass(frozen=True)
@@ -278,11 +225,15 @@ class VisualNMPC:
         fk_camera: CasADi function ``q (n,) -> T_base_camera (4x4)`` (e.g.
             :func:`repro.sim.casadi_kinematics.frame_pose_casadi` with ``T_frame_child`` the
             camera mounting); MX functions are expanded to SX.
-        camera: camera matrix and FOV bounds.
+        intrinsics: the controller's camera model, C = ``intrinsics.K()`` (eq. (1); any
+            skew included). Only fu, fv, u0, v0 and skew are used.
         n_points: number N of feature points.
         q_min, q_max: (n,) default joint bounds of the predicted configurations [rad].
         qd_max: (n,) default joint velocity bound magnitude [rad/s] (qd in [-qd_max, qd_max]).
         config: tuning.
+        image_bounds: (keyword, required) the field of view u in [u_min, u_max],
+            v in [v_min, v_max] [px] of the constraints (6)-(7), e.g. the paper's Table I
+            bounds or the whole image, ``intrinsics.image_bounds()``.
 
     The NLP parameters are ``q_k`` (n), ``p_d`` (2N), ``d_k`` (2N), ``T_base_object`` (3x4
     top rows), the object points (3xN, object frame) and the cost scale (set by
@@ -291,11 +242,15 @@ class VisualNMPC:
     solver's ``lbg/ubg`` and ``lbx/ubx`` inputs at every call.
     """
 
-    def __init__(self, fk_camera: ca.Function, camera: CameraModel, n_points: int,
+    def __init__(self, fk_camera: ca.Function, intrinsics: Intrinsics, n_points: int,
                  q_min: Sequence[float], q_max: Sequence[float], qd_max: Sequence[float],
-                 config: NMPCConfig | None = None) -> None:
+                 config: NMPCConfig | None = None, *, image_bounds: ImageBounds) -> None:
         self.config = cfg = NMPCConfig() if config is None else config
-        self.camera = camera
+        self.intrinsics = intrinsics
+        self.image_bounds = bounds = ImageBounds(*(float(b) for b in image_bounds))
+        if not (bounds.u_min < bounds.u_max and bounds.v_min < bounds.v_max):
+            raise ConfigError(f"empty field of view: u in [{bounds.u_min}, {bounds.u_max}], "
+                              f"v in [{bounds.v_min}, {bounds.v_max}] px")
         if n_points < 1:
             raise ConfigError(f"n_points must be >= 1, got {n_points}")
         self.n_points = m = int(n_points)
@@ -361,9 +316,9 @@ class VisualNMPC:
                                      [ca.vertcat(*q_pred), ca.vertcat(*p_pred), cost])
 
         # constant FOV bounds (6)-(7) and depth bounds, tightened by the margin
-        fov_lo = np.tile([camera.u_min + cfg.fov_margin, camera.v_min + cfg.fov_margin],
+        fov_lo = np.tile([bounds.u_min + cfg.fov_margin, bounds.v_min + cfg.fov_margin],
                          m * (Np - 1))
-        fov_hi = np.tile([camera.u_max - cfg.fov_margin, camera.v_max - cfg.fov_margin],
+        fov_hi = np.tile([bounds.u_max - cfg.fov_margin, bounds.v_max - cfg.fov_margin],
                          m * (Np - 1))
         if np.any(fov_lo > fov_hi):
             raise ConfigError(f"fov_margin {cfg.fov_margin} px leaves an empty field of view")
@@ -428,7 +383,7 @@ class VisualNMPC:
         # cT_b = (bT_c)^-1: P_c = R_bc^T (P_b - t_bc)
         P_c = ca.mtimes(R_bc.T, P_b - ca.repmat(t_bc, 1, m))
         X, Y, Z = P_c[0, :], P_c[1, :], P_c[2, :]
-        C = self.camera.matrix()
+        C = self.intrinsics.K()  # chan2011 eq. (1)
         x, y = X / Z, Y / Z
         u = C[0, 0] * x + C[0, 1] * y + C[0, 2]
         v = C[1, 1] * y + C[1, 2]

@@ -16,8 +16,11 @@ Conventions (used by every function of this module and by :mod:`repro.vision.fea
 
 .. math::
 
-    u = f_u \\, x + u_0, \\qquad v = f_v \\, y + v_0, \\qquad
-    K = \\begin{bmatrix} f_u & 0 & u_0 \\\\ 0 & f_v & v_0 \\\\ 0 & 0 & 1 \\end{bmatrix}.
+    u = f_u \\, x + s \\, y + u_0, \\qquad v = f_v \\, y + v_0, \\qquad
+    K = \\begin{bmatrix} f_u & s & u_0 \\\\ 0 & f_v & v_0 \\\\ 0 & 0 & 1 \\end{bmatrix}
+
+with ``s`` = ``Intrinsics.skew`` [px] (0 for rectangular pixels; see
+:meth:`Intrinsics.from_pixel_pitch` for the pixel-pitch form of chan2011 eq. (1)).
 
 Rendering goes through ``pybullet.getCameraImage``, which takes OpenGL-style view and
 projection matrices (eye frame ``x`` right, ``y`` up, ``z`` backwards; 16 floats in
@@ -25,12 +28,24 @@ column-major order; image row 0 is the top row). PyBullet's TinyRenderer samples
 at its *corner* (integer viewport coordinates), not at its centre as OpenGL does, so
 :meth:`Intrinsics.projection_matrix_gl` shifts the principal point accordingly (see there):
 with that matrix a rendered point lands on the pixel :func:`project_points` predicts.
+
+**Render-exact shapes.** TinyRenderer draws ``p.GEOM_CYLINDER`` visuals as a convex hull
+inflated by Bullet's collision margin (1 mm in every direction, whatever the size: a
+40 x 10 mm cylinder renders 42 x 12 mm, an 8 mm x 0.2 mm disc as a 10 mm x 2.2 mm button);
+boxes and ``p.GEOM_MESH`` shapes render exactly. The dots are therefore flat triangle-fan
+meshes, and :func:`cylinder_visual_shape` gives an exact cylinder for the bodies they sit on.
+
+**Detection is by colour**, so no other body in view may pass a dot's colour mask:
+:func:`check_scene_colors` rejects such a scene when it is built, and :func:`detect_dots`
+only accepts blobs shaped like the image of a disc (area and ellipse fill).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any, NamedTuple
 
 import cv2
 import numpy as np
@@ -59,9 +74,13 @@ DEFAULT_DOT_COLORS: tuple[tuple[int, int, int], ...] = (
     (0, 255, 255),
 )
 
-#: Thickness of a rendered dot disc [m]; its top face is at z = 0 of the target frame.
-DISC_THICKNESS = 2e-4
-#: Gap between the top face of a disc and the top face of the plate [m] (plate below).
+#: Sides of the regular polygon drawn for a dot disc (its vertices lie on the circle of
+#: radius ``dot_radius``; the polygon's area is 0.16 % below the circle's).
+DOT_SEGMENTS = 64
+#: Sides of the prism drawn by :func:`cylinder_visual_shape`.
+CYLINDER_SEGMENTS = 64
+#: Gap between a dot (a flat disc in the target plane z = 0) and the top face of the plate
+#: below it [m] (no z-fighting).
 PLATE_GAP = 1e-4
 #: Thickness of the plate [m].
 PLATE_THICKNESS = 2e-3
@@ -85,6 +104,16 @@ def _as_points(P: np.ndarray, dim: int, name: str) -> np.ndarray:
     return P
 
 
+class ImageBounds(NamedTuple):
+    """A rectangle of the image plane [px]: ``u in [u_min, u_max]``, ``v in [v_min, v_max]``
+    (e.g. the field of view a controller must keep the points in, chan2011 eqs. (6)-(7))."""
+
+    u_min: float
+    u_max: float
+    v_min: float
+    v_max: float
+
+
 @dataclass(frozen=True)
 class Intrinsics:
     """Pinhole intrinsics (no distortion) plus the clipping planes used for rendering.
@@ -94,6 +123,7 @@ class Intrinsics:
         fu, fv: focal lengths along u and v [px].
         u0, v0: principal point [px], in the pixel-centre convention of this module.
         near, far: clipping distances along the optical axis for rendering [m].
+        skew: skew coefficient s of ``u = fu x + s y + u0`` [px] (0: rectangular pixels).
     """
 
     width: int
@@ -104,6 +134,7 @@ class Intrinsics:
     v0: float
     near: float = 0.01
     far: float = 5.0
+    skew: float = 0.0
 
     def __post_init__(self) -> None:
         if self.width < 1 or self.height < 1:
@@ -112,6 +143,8 @@ class Intrinsics:
             raise ConfigError(f"focal lengths must be > 0, got fu={self.fu}, fv={self.fv}")
         if not (0 < self.near < self.far):
             raise ConfigError(f"need 0 < near < far, got near={self.near}, far={self.far}")
+        if not math.isfinite(self.skew):
+            raise ConfigError(f"skew must be finite, got {self.skew}")
 
     @classmethod
     def centered(cls, width: int, height: int, fu: float, fv: float | None = None,
@@ -120,27 +153,65 @@ class Intrinsics:
         return cls(width, height, fu, fu if fv is None else fv,
                    (width - 1) / 2.0, (height - 1) / 2.0, near, far)
 
+    @classmethod
+    def from_pixel_pitch(cls, f: float, ku: float, kv: float, u0: float, v0: float,
+                         width: int, height: int, beta: float = math.pi / 2,
+                         near: float = 0.01, far: float = 5.0) -> Intrinsics:
+        """Intrinsics from a focal length and pixel densities (chan2011 eq. (1)).
+
+        .. math::
+
+            C = \\begin{bmatrix} f k_u & f k_u \\cot\\beta & u_0 \\\\
+                                0 & f k_v / \\sin\\beta & v_0 \\\\ 0 & 0 & 1 \\end{bmatrix}
+            = K, \\quad f_u = f k_u, \\; f_v = f k_v / \\sin\\beta, \\;
+            s = f k_u \\cot\\beta
+
+        Args:
+            f: focal length [m].
+            ku, kv: pixels per unit length along x and y of the sensor [px/m].
+            u0, v0: principal point [px].
+            width, height: image size [px].
+            beta: angle between the sensor axes [rad], in (0, pi); pi/2 (no skew) gives
+                ``skew = 0`` exactly.
+            near, far: clipping distances for rendering [m].
+        """
+        if not (f > 0 and ku > 0 and kv > 0):
+            raise ConfigError(f"need f, ku, kv > 0, got f={f}, ku={ku}, kv={kv}")
+        if not 0.0 < beta < math.pi:
+            raise ConfigError(f"skew angle beta must be in (0, pi) rad, got {beta}")
+        fu = f * ku
+        # cot(pi/2) is 6e-17 in floating point; make the no-skew case exact.
+        no_skew = beta == math.pi / 2
+        skew = 0.0 if no_skew else fu / math.tan(beta)
+        fv = f * kv if no_skew else f * kv / math.sin(beta)
+        return cls(width, height, fu, fv, float(u0), float(v0), near, far, skew)
+
+    def image_bounds(self) -> ImageBounds:
+        """The whole image, ``u in [-1/2, W - 1/2]``, ``v in [-1/2, H - 1/2]`` [px]."""
+        return ImageBounds(-0.5, self.width - 0.5, -0.5, self.height - 0.5)
+
     def K(self) -> np.ndarray:
         """3x3 calibration matrix mapping homogeneous normalised coordinates to pixels."""
-        return np.array([[self.fu, 0.0, self.u0], [0.0, self.fv, self.v0], [0.0, 0.0, 1.0]])
+        return np.array([[self.fu, self.skew, self.u0], [0.0, self.fv, self.v0],
+                         [0.0, 0.0, 1.0]])
 
     def to_normalized(self, uv: np.ndarray) -> np.ndarray:
         """Pixel coordinates (N, 2) [px] -> normalised coordinates (N, 2) [-].
 
-        .. math:: x = (u - u_0) / f_u, \\qquad y = (v - v_0) / f_v
+        .. math:: y = (v - v_0) / f_v, \\qquad x = (u - u_0 - s y) / f_u
         """
         uv = np.asarray(uv, dtype=float)
-        return np.stack([(uv[..., 0] - self.u0) / self.fu, (uv[..., 1] - self.v0) / self.fv],
-                        axis=-1)
+        y = (uv[..., 1] - self.v0) / self.fv
+        return np.stack([(uv[..., 0] - self.u0 - self.skew * y) / self.fu, y], axis=-1)
 
     def to_pixels(self, xy: np.ndarray) -> np.ndarray:
         """Normalised coordinates (N, 2) [-] -> pixel coordinates (N, 2) [px].
 
-        .. math:: u = f_u x + u_0, \\qquad v = f_v y + v_0
+        .. math:: u = f_u x + s y + u_0, \\qquad v = f_v y + v_0
         """
         xy = np.asarray(xy, dtype=float)
-        return np.stack([self.fu * xy[..., 0] + self.u0, self.fv * xy[..., 1] + self.v0],
-                        axis=-1)
+        return np.stack([self.fu * xy[..., 0] + self.skew * xy[..., 1] + self.u0,
+                         self.fv * xy[..., 1] + self.v0], axis=-1)
 
     def in_image(self, uv: np.ndarray) -> np.ndarray:
         """(N,) bool: True where (u, v) [px] lies on the image, u in [-1/2, W-1/2] etc."""
@@ -155,26 +226,27 @@ class Intrinsics:
         Maps OpenGL eye coordinates (``x`` right, ``y`` up, ``z`` backwards, see
         :func:`view_matrix_gl`) to clip coordinates such that the renderer's sample point
         for pixel ``rgb[r, c]`` is the point that projects to ``(u, v) = (c, r)``. It honours
-        an off-centre principal point and ``fu != fv``. With ``s`` the sample offset of the
-        renderer (window coordinates of pixel ``(r, c)``'s sample point are
-        ``(c + s, H - 1 - r + s)``, origin at the lower-left image corner):
+        an off-centre principal point, ``fu != fv`` and the skew ``s``. With ``o`` the sample
+        offset of the renderer (window coordinates of pixel ``(r, c)``'s sample point are
+        ``(c + o, H - 1 - r + o)``, origin at the lower-left image corner):
 
         .. math::
 
             P = \\begin{bmatrix}
-                2 f_u / W & 0 & 1 - 2 (u_0 + s) / W & 0 \\\\
-                0 & 2 f_v / H & 2 (v_0 + 1 - s) / H - 1 & 0 \\\\
+                2 f_u / W & -2 s / W & 1 - 2 (u_0 + o) / W & 0 \\\\
+                0 & 2 f_v / H & 2 (v_0 + 1 - o) / H - 1 & 0 \\\\
                 0 & 0 & -(f + n) / (f - n) & -2 f n / (f - n) \\\\
                 0 & 0 & -1 & 0
             \\end{bmatrix}
 
-        with ``n, f`` = ``near, far``.
+        with ``n, f`` = ``near, far`` (the eye frame's ``y`` is minus the camera frame's,
+        hence the sign of the skew term).
 
         Args:
             renderer: ``"tiny"`` (PyBullet's ``ER_TINY_RENDERER``, which samples pixels at
-                integer viewport coordinates, i.e. at a pixel corner: ``s = 0``; verified by
+                integer viewport coordinates, i.e. at a pixel corner: ``o = 0``; verified by
                 the render-vs-projection test) or ``"opengl"`` (``ER_BULLET_HARDWARE_OPENGL``,
-                standard OpenGL sampling at pixel centres: ``s = 1/2``).
+                standard OpenGL sampling at pixel centres: ``o = 1/2``).
 
         Note: PyBullet's own ``computeProjectionMatrixFOV`` equals the ``"opengl"`` matrix
         with a centred principal point; used with TinyRenderer it puts the principal point
@@ -182,13 +254,14 @@ class Intrinsics:
         """
         if renderer not in _SAMPLE_OFFSET:
             raise UnknownChoiceError("GL renderer", renderer, GL_RENDERERS)
-        s = _SAMPLE_OFFSET[renderer]
+        o = _SAMPLE_OFFSET[renderer]
         W, H, n, f = float(self.width), float(self.height), self.near, self.far
         P = np.zeros((4, 4))
         P[0, 0] = 2.0 * self.fu / W
-        P[0, 2] = 1.0 - 2.0 * (self.u0 + s) / W
+        P[0, 1] = -2.0 * self.skew / W
+        P[0, 2] = 1.0 - 2.0 * (self.u0 + o) / W
         P[1, 1] = 2.0 * self.fv / H
-        P[1, 2] = 2.0 * (self.v0 + 1.0 - s) / H - 1.0
+        P[1, 2] = 2.0 * (self.v0 + 1.0 - o) / H - 1.0
         P[2, 2] = -(f + n) / (f - n)
         P[2, 3] = -2.0 * f * n / (f - n)
         P[3, 2] = -1.0
@@ -251,20 +324,22 @@ def disc_image_centroids(intr: Intrinsics, T_world_camera: np.ndarray, target: D
                          T_world_target: np.ndarray) -> np.ndarray:
     """Exact centroids of the images of the target's (full, unoccluded) dot discs.
 
-    The image of a circle of the target plane is a conic; this returns its centre, which is
-    the centroid of the filled ellipse and differs from the projection of the disc centre
-    (:func:`project_points`) when the disc is tilted (perspective bias). With ``H`` the
-    plane-to-image homography and ``C_0`` the circle of centre ``(c_x, c_y)``, radius ``r``:
+    The image of a circle is a conic; this returns its centre, which is the centroid of the
+    filled ellipse and differs from the projection of the disc centre
+    (:func:`project_points`) when the disc is tilted (perspective bias). Dot ``i`` lies in
+    the plane ``z = z_i`` of the target frame (its own height when the dots are not
+    coplanar); with ``H_i`` that plane's homography to the image and ``C_0`` the circle of
+    centre ``(c_x, c_y)``, radius ``r``:
 
     .. math::
 
-        H = K \\, [r_1 \\; r_2 \\; t], \\qquad
+        H_i = K \\, [r_1 \\; r_2 \\; z_i r_3 + t], \\qquad
         C_0 = \\begin{bmatrix} 1 & 0 & -c_x \\\\ 0 & 1 & -c_y \\\\
               -c_x & -c_y & c_x^2 + c_y^2 - r^2 \\end{bmatrix}, \\qquad
-        C = H^{-T} C_0 H^{-1}, \\qquad
+        C = H_i^{-T} C_0 H_i^{-1}, \\qquad
         (u, v)^T = -C_{1:2,1:2}^{-1} C_{1:2,3}
 
-    with ``r_1, r_2, t`` the first two columns of the rotation and the translation of
+    with ``r_1, r_2, r_3, t`` the columns of the rotation and the translation of
     ``T_camera_target``. Valid when the whole disc is in front of the camera.
 
     Args:
@@ -278,10 +353,12 @@ def disc_image_centroids(intr: Intrinsics, T_world_camera: np.ndarray, target: D
     """
     T_cw = np.linalg.inv(_as_pose(T_world_camera, "T_world_camera"))
     T_ct = T_cw @ _as_pose(T_world_target, "T_world_target")
-    H_inv = np.linalg.inv(intr.K() @ T_ct[:3, [0, 1, 3]])
+    K = intr.K()
     r = target.dot_radius
     out = np.empty((target.n_points, 2))
-    for i, (cx, cy, _) in enumerate(target.points_target):
+    for i, (cx, cy, cz) in enumerate(target.points_target):
+        H_inv = np.linalg.inv(K @ np.column_stack([T_ct[:3, 0], T_ct[:3, 1],
+                                                   cz * T_ct[:3, 2] + T_ct[:3, 3]]))
         C0 = np.array([[1.0, 0.0, -cx], [0.0, 1.0, -cy], [-cx, -cy, cx * cx + cy * cy - r * r]])
         C = H_inv.T @ C0 @ H_inv
         out[i] = -np.linalg.solve(C[:2, :2], C[:2, 2])
@@ -330,6 +407,22 @@ _MIN_SATURATION = 100
 _MIN_VALUE = 40
 #: Half-width of the hue window around a dot colour, in OpenCV hue units (2 deg each).
 _HUE_TOLERANCE = 10
+#: Margins of :func:`check_scene_colors` over the detection thresholds (8-bit rounding of
+#: dark shaded pixels moves their hue and saturation by a few units): a body colour is safe
+#: when its saturation is below ``_MIN_SATURATION - _SATURATION_MARGIN`` or its hue is more
+#: than ``hue_tolerance + _HUE_MARGIN`` from every dot hue.
+_SATURATION_MARGIN = 10
+_HUE_MARGIN = 3
+#: Accepted range of a blob's ellipse fill ``area / (4 pi sqrt(det Sigma))`` (1 for a
+#: filled ellipse, 0.95 for a rectangle or a half disc; rings, crescents, L shapes and
+#: one-pixel diagonal lines fall below 0.8).
+_ELLIPSE_FILL_RANGE = (0.8, 1.15)
+
+
+def _hue_distance(a: int, b: int) -> int:
+    """Distance of two OpenCV hues on the hue circle (period 180)."""
+    d = abs(a - b) % 180
+    return min(d, 180 - d)
 
 
 def _check_colors(colors: Sequence[Sequence[int]], hue_tolerance: int = _HUE_TOLERANCE
@@ -347,35 +440,100 @@ def _check_colors(colors: Sequence[Sequence[int]], hue_tolerance: int = _HUE_TOL
         hues.append(int(hsv[0]))
     for i in range(len(hues)):
         for j in range(i):
-            d = abs(hues[i] - hues[j])
-            if min(d, 180 - d) <= 2 * hue_tolerance:
+            if _hue_distance(hues[i], hues[j]) <= 2 * hue_tolerance:
                 raise ConfigError(f"dot colours {tuple(colors[j])} and {tuple(colors[i])} have "
                                   f"hues closer than {4 * hue_tolerance} deg")
     return hues
 
 
+def check_scene_colors(target: DotTarget, body_rgba: Mapping[str, Sequence[float]]) -> None:
+    """Reject a scene in which a body's colour could pass a dot's detection mask.
+
+    :func:`detect_dots` keeps the pixels whose OpenCV hue is within ``hue_tolerance`` of a
+    dot's hue and whose saturation is >= 100/255. TinyRenderer shades a colour ``c`` as
+    ``k c + w`` (``k`` in [0, 0.95]: ambient + diffuse; ``w`` >= 0: a grey specular term),
+    which keeps its hue and never raises its saturation; so a body whose colour is
+    desaturated (S < 90/255) or whose hue is more than ``hue_tolerance + 3`` units from every
+    dot hue can never produce dot pixels, whatever its pose and lighting. Its value V is not
+    used (a specular highlight can lift a dark body above the mask's V threshold). With
+    dot hues all around the circle (e.g. ten hues 36 deg apart) this means: every other body
+    in view must be desaturated (greys, beiges, ...).
+
+    Args:
+        target: the dot target (colours and hue tolerance).
+        body_rgba: body name -> its colour, RGB or RGBA floats in [0, 1] (PyBullet's
+            ``rgbaColor``; alpha is ignored).
+
+    Raises:
+        ConfigError: naming the first body and dot that conflict, with both colours.
+    """
+    hues = _check_colors(target.colors, target.hue_tolerance)
+    window = target.hue_tolerance + _HUE_MARGIN
+    for name, rgba in body_rgba.items():
+        c = [float(x) for x in rgba]
+        if len(c) not in (3, 4) or not all(0.0 <= x <= 1.0 for x in c):
+            raise ConfigError(f"colour of body {name!r} must be RGB(A) floats in [0, 1], "
+                              f"got {tuple(rgba)}")
+        rgb8 = [int(round(255.0 * x)) for x in c[:3]]
+        h, s_, v = (int(x) for x in _hsv(rgb8))
+        if s_ < _MIN_SATURATION - _SATURATION_MARGIN:
+            continue
+        for i, hue in enumerate(hues):
+            if _hue_distance(h, hue) <= window:
+                raise ConfigError(
+                    f"body {name!r} (rgba {tuple(c)}, OpenCV HSV ({h}, {s_}, {v})) would pass "
+                    f"the detection mask of dot index {i} (RGB {target.colors[i]}, hue {hue} +- "
+                    f"{target.hue_tolerance}): give the body a desaturated colour (HSV "
+                    f"saturation < {(_MIN_SATURATION - _SATURATION_MARGIN) / 255:.2f}, e.g. a "
+                    f"grey or a beige) or a hue more than {window} units (2 deg each) from "
+                    f"every dot hue")
+
+
 @dataclass(frozen=True, eq=False)
 class DotTarget:
-    """Planar target: a white plate carrying coloured dots.
+    """Coloured dots (flat discs) on an optional white plate, or on a part built by the caller.
 
     Attributes:
-        points_target: (N, 3) dot centres in the target frame [m]; the target is planar,
-            z = 0 (the plate's visible face is at z = 0, its normal is +z of the target frame).
+        points_target: (N, 3) dot centres in the target frame [m]. With a plate the target is
+            planar, z = 0; without one the dots need not be coplanar.
         colors: one RGB colour (0-255) per dot, saturated and of distinct hues; the colour
             identifies the dot, which gives the image-to-model correspondence.
         dot_radius: radius of every dot [m].
         plate_size: side lengths of the plate along x and y of the target frame [m]; None for
-            no plate: the dots then need not be coplanar (each disc faces +z of the target
-            frame at its own height, e.g. on the faces of a part built by the caller).
+            no plate (each disc then faces +z of the target frame at its own height, e.g. on
+            the faces of a part built by the caller, which must stay below the discs).
         hue_tolerance: half-width of the hue window of detection, OpenCV units (2 deg
             each); dot hues must be more than two tolerances apart. 10 allows 6 colours,
             8 allows 10 (36 deg apart).
 
-    Note: under perspective the centroid of the image of a tilted disc (what
-    :func:`detect_dots` measures) is not the image of its centre (what :func:`project_points`
-    gives); the offset grows like ``f (r / Z)^2``: ~0.7 px for r = 12 mm at Z = 0.25 m,
-    30 deg tilt, f = 600 px (up to ~1 px in the worst geometry), ~0.2 px for r = 6 mm.
-    :func:`disc_image_centroids` computes the exact blob centre.
+    **Drawing** (:func:`spawn_dot_target`, :meth:`describe`): each dot is a flat regular
+    ``DOT_SEGMENTS``-gon of circumradius ``dot_radius`` (a ``p.GEOM_MESH`` triangle fan, zero
+    thickness, visible from +z only) lying in the plane through its point parallel to the
+    target's xy plane, centred on the point: the model point *is* the centre of the visible
+    disc. The plate (a ``p.GEOM_BOX``) has its top face ``PLATE_GAP`` below the dots.
+
+    **What** :func:`detect_dots` **measures, and its bias.** The blob centroid is the centre
+    of the disc's image ellipse, :func:`disc_image_centroids`, not the projection of the
+    disc centre (:func:`project_points`): under perspective a tilted disc's near half images
+    larger. This offset grows like ``f (r / Z)^2``: ~0.7 px for r = 12 mm at Z = 0.25 m,
+    30 deg tilt, f = 600 px; <= 0.3 px for the 4 mm chan2011 dots at 0.22-0.36 m, f = 1060 px.
+    The blob matches :func:`disc_image_centroids` within rasterisation noise as long as
+    nothing hides part of the disc: <= 0.16 px around the chan2011 goals (dots seen 17-56 deg
+    off their normal; bounded in tests/test_camera.py), up to ~0.6 px for thin ellipses
+    (65-80 deg off), and a disc seen within ~5 deg of edge-on is lost (too thin a blob).
+
+    Earlier the dots were ``p.GEOM_CYLINDER`` discs (0.2 mm thick, centred 0.1 mm below the
+    point), which TinyRenderer draws 1 mm fat in every direction (see the module docstring):
+    a 10 mm x 2.2 mm button whose top face was 1.0 mm above the model point. On the chan2011
+    conrod's bosses (``p.GEOM_CYLINDER`` too, their faces drawn 1 mm too high) only that top
+    face showed, so the blob sat ``f * 1 mm * sin(theta) / Z`` off (theta: view angle off the
+    dot normal): 2.0 px predicted, 1.5-2.2 px measured for the seven boss dots at the end of
+    the committed simulation run (Z = 0.21-0.24 m, theta ~ 26 deg; median 2.2-2.7 px over
+    the run), 2-3.5 px (up to 6.6 px) in the experiment run at 0.25-0.36 m and larger theta;
+    0.2 px for the three dots on the (exact) box beam, where the whole button showed.
+    Tilted-disc perspective (<= 0.3 px), tessellation (64 sides), the 0.3 mm stand-off and
+    the hue mask (flat discs shade uniformly) contribute < 0.3 px together. Flat mesh discs
+    on render-exact parts (:func:`cylinder_visual_shape`) remove the bias.
     """
 
     points_target: np.ndarray
@@ -424,6 +582,123 @@ class DotTarget:
         T = _as_pose(T_world_target, "T_world_target")
         return self.points_target @ T[:3, :3].T + T[:3, 3]
 
+    def describe(self) -> dict[str, Any]:
+        """Everything needed to redraw and re-detect the dots with plain PyBullet/OpenCV
+        (JSON-able; lengths in metres, poses in the target frame, whose world pose the
+        caller records)."""
+        vertices, indices = _disc_mesh(self.dot_radius)
+        plate = None
+        if self.plate_size is not None:
+            plate = {
+                "shape": "box",
+                "size": [*self.plate_size, PLATE_THICKNESS],
+                "centre_target": [0.0, 0.0, -PLATE_GAP - PLATE_THICKNESS / 2.0],
+                "top_face_z": -PLATE_GAP,
+                "gap_below_dots": PLATE_GAP,
+                "rgba": [1.0, 1.0, 1.0, 1.0],
+                "pybullet": "p.createVisualShape(p.GEOM_BOX, halfExtents=size / 2) at "
+                            "T_world_target @ trans(centre_target)",
+            }
+        return {
+            "points_target": self.points_target.tolist(),
+            "point_definition": "centre of dot i's disc, in the target frame [m]",
+            "colors_rgb255": [list(c) for c in self.colors],
+            "dot": {
+                "shape": "disc",
+                "radius": self.dot_radius,
+                "thickness": 0.0,
+                "n_sides": DOT_SEGMENTS,
+                "polygon": "regular polygon, vertex k at radius * (cos(2 pi k / n_sides), "
+                           "sin(2 pi k / n_sides), 0) in the dot frame",
+                "dot_frame": "T_world_target @ trans(points_target[i]): the disc lies in the "
+                             "dot frame's xy plane, centred on its origin, facing +z of the "
+                             "target frame (visible from z > 0 only)",
+                "top_face_offset": 0.0,
+                "top_face": "the visible face contains the model point and is centred on it "
+                            "(offset along +z of the target frame [m])",
+                "pybullet": "p.createVisualShape(p.GEOM_MESH, vertices=mesh.vertices, "
+                            "indices=mesh.indices, rgbaColor=colors_rgb255[i] / 255 + [1]) "
+                            "placed at the dot frame (not p.GEOM_CYLINDER, which TinyRenderer "
+                            "draws 1 mm fat)",
+                "mesh": {"vertices": vertices, "indices": indices},
+            },
+            "plate": plate,
+            "detection": {
+                "colour_space": "OpenCV HSV of the RGB image (H in [0, 180), S, V in [0, 255])",
+                "hue_tolerance": self.hue_tolerance,
+                "min_saturation": _MIN_SATURATION,
+                "min_value": _MIN_VALUE,
+                "blob": "per dot: the largest 8-connected component of its mask with an "
+                        "ellipse fill area / (4 pi sqrt(det Sigma)) in "
+                        f"{list(_ELLIPSE_FILL_RANGE)} and an area no larger than "
+                        f"{_MAX_AREA_FACTOR} x pi (f r / Z + 1)^2 px",
+                "measured_point": "blob centroid (first-order moments) = centre of the disc's "
+                                  "image ellipse (perspective bias vs the projected centre)",
+            },
+            "pixel_convention": "(u, v) [px]: u right (column), v down (row); (0, 0) is the "
+                                "centre of the top-left pixel, so pixel rgb[r, c] is at "
+                                "(u, v) = (c, r) and the image spans u in [-1/2, W - 1/2], "
+                                "v in [-1/2, H - 1/2]",
+        }
+
+
+def _disc_mesh(radius: float, n: int = DOT_SEGMENTS) -> tuple[list[list[float]], list[int]]:
+    """Flat regular n-gon of circumradius ``radius`` [m] in the xy plane, centred on the
+    origin, as a triangle fan wound counter-clockwise seen from +z (visible from +z only)."""
+    a = 2.0 * np.pi * np.arange(n) / n
+    vertices = [[0.0, 0.0, 0.0]] + [[radius * float(np.cos(t)), radius * float(np.sin(t)), 0.0]
+                                    for t in a]
+    indices = [i for k in range(n) for i in (0, 1 + k, 1 + (k + 1) % n)]
+    return vertices, indices
+
+
+def cylinder_visual_shape(client_id: int, radius: float, length: float,
+                          rgba: Sequence[float], n_segments: int = CYLINDER_SEGMENTS) -> int:
+    """Visual shape of a cylinder that TinyRenderer draws at its true size.
+
+    ``p.GEOM_CYLINDER`` visuals are drawn as a convex hull inflated by a 1 mm margin (see
+    the module docstring); this is a closed regular ``n_segments``-gon prism mesh
+    (``p.GEOM_MESH``) with its vertices on the circle of ``radius``, flat caps and smooth
+    side normals. Axis along z of the shape frame, centred on its origin (as
+    ``p.GEOM_CYLINDER``). Use it for bodies a camera sees, e.g. parts carrying dots.
+
+    Args:
+        client_id: PyBullet physics client id.
+        radius: radius [m]; length: length along z [m].
+        rgba: colour, 4 floats in [0, 1].
+        n_segments: number of sides of the prism.
+
+    Returns:
+        The visual shape id (for ``p.createMultiBody(baseVisualShapeIndex=...)``).
+    """
+    if not (radius > 0 and length > 0) or n_segments < 3:
+        raise ConfigError(f"need radius, length > 0 and n_segments >= 3, got {radius}, "
+                          f"{length}, {n_segments}")
+    a = 2.0 * np.pi * np.arange(n_segments) / n_segments
+    ring = np.c_[radius * np.cos(a), radius * np.sin(a)]
+    h = length / 2.0
+    vertices: list[list[float]] = []
+    normals: list[list[float]] = []
+    indices: list[int] = []
+    for z, sign in ((h, 1.0), (-h, -1.0)):  # caps: centre + ring, flat normals
+        base = len(vertices)
+        vertices += [[0.0, 0.0, z]] + [[x, y, z] for x, y in ring]
+        normals += [[0.0, 0.0, sign]] * (n_segments + 1)
+        for k in range(n_segments):
+            a0, a1 = base + 1 + k, base + 1 + (k + 1) % n_segments
+            indices += [base, a0, a1] if sign > 0 else [base, a1, a0]
+    base = len(vertices)  # side: top and bottom rings, radial normals
+    for x, y in ring:
+        vertices += [[x, y, h], [x, y, -h]]
+        normals += [[x / radius, y / radius, 0.0]] * 2
+    for k in range(n_segments):
+        t0, b0 = base + 2 * k, base + 2 * k + 1
+        t1, b1 = base + 2 * ((k + 1) % n_segments), base + 2 * ((k + 1) % n_segments) + 1
+        indices += [t0, b0, b1, t0, b1, t1]
+    return int(p.createVisualShape(p.GEOM_MESH, vertices=vertices, indices=indices,
+                                   normals=normals, rgbaColor=list(rgba),
+                                   physicsClientId=client_id))
+
 
 def _dot_target_poses(target: DotTarget, T_world_target: np.ndarray
                       ) -> list[tuple[list[float], list[float]]]:
@@ -432,7 +707,7 @@ def _dot_target_poses(target: DotTarget, T_world_target: np.ndarray
     quat = _quat_xyzw(T[:3, :3])
     centres = ([np.array([0.0, 0.0, -PLATE_GAP - PLATE_THICKNESS / 2.0])]
                if target.plate_size is not None else [])
-    centres += [pt + np.array([0.0, 0.0, -DISC_THICKNESS / 2.0]) for pt in target.points_target]
+    centres += list(target.points_target)
     return [((T[:3, :3] @ c + T[:3, 3]).tolist(), quat) for c in centres]
 
 
@@ -442,13 +717,12 @@ def _quat_xyzw(R: np.ndarray) -> list[float]:
 
 
 def spawn_dot_target(client_id: int, target: DotTarget, T_world_target: np.ndarray) -> list[int]:
-    """Create the target's visual bodies in a PyBullet client.
+    """Create the target's visual bodies in a PyBullet client (as :meth:`DotTarget.describe`).
 
     A white box plate (``plate_size`` x ``PLATE_THICKNESS``) whose top face lies
-    ``PLATE_GAP`` below the target plane, and per dot a cylinder disc of radius
-    ``dot_radius`` and thickness ``DISC_THICKNESS`` whose top face, centred on the dot, lies in
-    the target plane z = 0 (so the visible dot centre is exactly ``points_target``). Visual
-    shapes only: no collision shape, mass 0.
+    ``PLATE_GAP`` below the target plane, and per dot a flat disc mesh (see
+    :class:`DotTarget`) centred on the dot, in the plane through it parallel to the target's
+    xy plane, facing +z. Visual shapes only: no collision shape, mass 0.
 
     Args:
         client_id: PyBullet physics client id.
@@ -464,9 +738,10 @@ def spawn_dot_target(client_id: int, target: DotTarget, T_world_target: np.ndarr
         shapes.append(p.createVisualShape(
             p.GEOM_BOX, halfExtents=[sx / 2.0, sy / 2.0, PLATE_THICKNESS / 2.0],
             rgbaColor=[1.0, 1.0, 1.0, 1.0], physicsClientId=client_id))
+    vertices, indices = _disc_mesh(target.dot_radius)
     for color in target.colors:
         shapes.append(p.createVisualShape(
-            p.GEOM_CYLINDER, radius=target.dot_radius, length=DISC_THICKNESS,
+            p.GEOM_MESH, vertices=vertices, indices=indices,
             rgbaColor=[c / 255.0 for c in color] + [1.0], physicsClientId=client_id))
     ids = []
     for shape, (pos, quat) in zip(shapes, _dot_target_poses(target, T_world_target),
@@ -504,14 +779,37 @@ def _hue_mask(hsv: np.ndarray, hue: int, tolerance: int = _HUE_TOLERANCE) -> np.
     return mask
 
 
+def _ellipse_fill(moments: Mapping[str, float]) -> float:
+    """Area of a blob over the area of the ellipse with its second moments [-].
+
+    Pixels are unit squares (variance 1/12 added per axis); 1 for a filled ellipse.
+    """
+    m00 = moments["m00"]
+    s_uu = moments["mu20"] / m00 + 1.0 / 12.0
+    s_vv = moments["mu02"] / m00 + 1.0 / 12.0
+    s_uv = moments["mu11"] / m00
+    det = s_uu * s_vv - s_uv * s_uv
+    return float(m00 / (4.0 * np.pi * np.sqrt(det))) if det > 0 else 0.0
+
+
+#: :meth:`Camera.measure` rejects blobs larger than this factor times the area of the full,
+#: fronto-parallel image of the disc at its depth, pi (f r / Z + 1)^2 [px] (a tilted,
+#: off-axis or close disc images at most ~1.2x that).
+_MAX_AREA_FACTOR = 3.0
+
+
 def detect_dots(rgb: np.ndarray, colors: Sequence[Sequence[int]],
-                min_area_px: int = 6, hue_tolerance: int = _HUE_TOLERANCE
+                min_area_px: int = 6, hue_tolerance: int = _HUE_TOLERANCE,
+                max_area_px: float | Sequence[float] | np.ndarray | None = None,
                 ) -> tuple[np.ndarray, np.ndarray]:
     """Find the centroid of each coloured dot in an RGB image.
 
-    Per colour: HSV mask (hue within +-20 deg of the colour's hue, saturation >= 100/255,
-    value >= 40/255; TinyRenderer's shading scales a colour, which keeps its hue), 8-connected
-    components, and the centroid (first-order image moments) of the largest component:
+    Per colour: HSV mask (hue within ``hue_tolerance`` of the colour's hue, saturation
+    >= 100/255, value >= 40/255; TinyRenderer's shading scales a colour, which keeps its
+    hue), 8-connected components, and among the components shaped like the image of a disc
+    -- area in ``[min_area_px, max_area_px]`` and ellipse fill
+    ``m_00 / (4 pi sqrt(det Sigma))`` in [0.8, 1.15] (``Sigma`` the blob's second central
+    moments) -- the largest; its centroid (first-order image moments):
 
     .. math:: u = m_{10} / m_{00}, \\qquad v = m_{01} / m_{00}
 
@@ -520,23 +818,30 @@ def detect_dots(rgb: np.ndarray, colors: Sequence[Sequence[int]],
     Args:
         rgb: (H, W, 3) uint8 RGB image.
         colors: N RGB colours (0-255), saturated and of distinct hues.
-        min_area_px: a largest component smaller than this [px] counts as not found.
+        min_area_px: smaller components are ignored [px].
+        hue_tolerance: half-width of the hue window, OpenCV units (2 deg each).
+        max_area_px: larger components are ignored [px]; a number or one per dot (None: no
+            bound). :meth:`Camera.measure` bounds it by the dot's size at its depth.
 
     Returns:
         ``(uv, found)``: ``uv`` (N, 2) centroids [px], NaN rows for dots not found;
         ``found`` (N,) bool.
 
-    Limitations: a dot cut by the image border is still found, with the centroid of its
-    visible part; any other saturated object of a similar hue in view (e.g. an orange robot
-    link vs a red or yellow dot) competes for the largest component.
+    Limitations: a dot cut by the image border or partly hidden is still found if what is
+    left is elliptical (a half disc is), with the centroid of its visible part. The shape
+    test is a second line of defence: another body of a dot's hue in view (e.g. a brown
+    box and an orange dot) is excluded by construction with :func:`check_scene_colors`.
     """
     rgb = np.asarray(rgb)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise ConfigError(f"rgb must be an (H, W, 3) uint8 image, got {rgb.shape} {rgb.dtype}")
     hues = _check_colors(colors, hue_tolerance)
+    max_area = np.broadcast_to(np.inf if max_area_px is None else
+                               np.asarray(max_area_px, dtype=float), (len(hues),))
     hsv = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2HSV)
     uv = np.full((len(hues), 2), np.nan)
     found = np.zeros(len(hues), dtype=bool)
+    lo_fill, hi_fill = _ELLIPSE_FILL_RANGE
     for i, hue in enumerate(hues):
         mask = _hue_mask(hsv, hue, hue_tolerance)
         # Label only the bounding box of the mask's pixels (a few hundred pixels instead of
@@ -544,15 +849,22 @@ def detect_dots(rgb: np.ndarray, colors: Sequence[Sequence[int]],
         x0, y0, w, h = cv2.boundingRect(mask)
         if w == 0 or h == 0:
             continue
-        n, _, stats, centroids = cv2.connectedComponentsWithStats(
+        n, labels, stats, centroids = cv2.connectedComponentsWithStats(
             np.ascontiguousarray(mask[y0:y0 + h, x0:x0 + w]), connectivity=8)
-        if n < 2:
-            continue
-        k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-        if stats[k, cv2.CC_STAT_AREA] < min_area_px:
-            continue
-        uv[i] = centroids[k] + (x0, y0)
-        found[i] = True
+        areas = stats[1:, cv2.CC_STAT_AREA]
+        for k in 1 + np.argsort(-areas, kind="stable"):
+            area = stats[k, cv2.CC_STAT_AREA]
+            if area < min_area_px:
+                break  # sorted by decreasing area
+            if area > max_area[i]:
+                continue
+            cx, cy, cw, ch = stats[k, :4]
+            blob = (labels[cy:cy + ch, cx:cx + cw] == k).astype(np.uint8)
+            if not lo_fill <= _ellipse_fill(cv2.moments(blob, binaryImage=True)) <= hi_fill:
+                continue
+            uv[i] = centroids[k] + (x0, y0)
+            found[i] = True
+            break
     return uv, found
 
 
@@ -582,6 +894,20 @@ class Camera:
         """T_world_camera = T_world_link @ T_link_camera (4x4) [m]."""
         return _as_pose(T_world_link, "T_world_link") @ self.T_link_camera
 
+    def max_blob_areas(self, target: DotTarget, Z: np.ndarray) -> np.ndarray:
+        """(N,) largest blob area accepted for each dot [px]: ``_MAX_AREA_FACTOR`` (3) times
+        the area of the full fronto-parallel image of its disc at depth ``Z`` [m],
+        ``pi (f r / Z + 1)^2`` with ``f = max(fu, fv)``; 0 for ``Z <= 0`` (behind the camera).
+
+        ours: the depths come from the true geometry, like the ``Z`` :meth:`measure`
+        returns; the bound is loose (a real system would use its depth estimate).
+        """
+        f = max(self.intrinsics.fu, self.intrinsics.fv)
+        Z = np.asarray(Z, dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r_px = np.where(Z > 0, f * target.dot_radius / np.where(Z > 0, Z, 1.0) + 1.0, 0.0)
+        return _MAX_AREA_FACTOR * np.pi * r_px**2
+
     def measure(self, client_id: int, T_world_camera: np.ndarray, target: DotTarget,
                 T_world_target: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Measure the image points of the target's dots.
@@ -594,7 +920,8 @@ class Camera:
 
         Returns:
             ``(uv, found, Z)``: ``uv`` (N, 2) [px], NaN rows where not found; ``found`` (N,)
-            bool -- the detection result in ``"render"`` mode, and in ``"exact"`` mode False
+            bool -- the detection result in ``"render"`` mode (blobs larger than
+            :meth:`max_blob_areas` are not taken for a dot), and in ``"exact"`` mode False
             for dots behind the camera (Z <= 0) or whose centre projects outside the image;
             ``Z`` (N,) depth of each dot centre in the camera frame from the exact
             geometry [m] (for every dot, found or not).
@@ -608,5 +935,6 @@ class Camera:
             uv = np.where(found[:, None], uv_exact, np.nan)
             return uv, found, Z
         rgb = render_rgb(client_id, self.intrinsics, T_world_camera)
-        uv, found = detect_dots(rgb, target.colors, hue_tolerance=target.hue_tolerance)
+        uv, found = detect_dots(rgb, target.colors, hue_tolerance=target.hue_tolerance,
+                                max_area_px=self.max_blob_areas(target, Z))
         return uv, found, Z

@@ -48,9 +48,13 @@ __all__ = ["CameraRig", "Episode", "Features", "Observation", "Sensor", "StepRes
 
 Scalar = float | int | str | bool
 
-#: A ray from the camera to a dot counts as blocked when it hits a body before this
-#: distance short of the dot [m] (the dots stand 0.1-0.3 mm proud of their support).
-VISIBILITY_MARGIN = 1.0e-3
+#: Visibility rays end this far above the dot, along the dot's normal (+z of the target
+#: frame) [m]: PyBullet's ray test meets a face up to ~1 mm off, and the dots stand only
+#: 0.1-0.3 mm proud of their support; a ray that reaches the lifted point unblocked sees
+#: the dot.
+VISIBILITY_LIFT = 2.0e-3
+#: ... and a hit less than this short of the ray's end does not count [m].
+VISIBILITY_MARGIN = 0.5e-3
 #: Rays start this far in front of the optical centre [m] (clear of the camera's own body).
 RAY_START = 5.0e-3
 
@@ -233,11 +237,14 @@ def runner_columns(ep: Episode) -> Columns:
 
 
 # ----------------------------------------------------------------------------- audit
-def _visible(scene: Scene, T_wc: np.ndarray, P_world: np.ndarray, uv: np.ndarray,
-             Z: np.ndarray, cam: Camera) -> np.ndarray:
-    """(N,) True where a point is in front, inside the image and unoccluded (ray test in the
-    physics client, which holds every body)."""
+def _visible(scene: Scene, T_wc: np.ndarray, P_world: np.ndarray, normal: np.ndarray,
+             uv: np.ndarray, Z: np.ndarray, cam: Camera) -> np.ndarray:
+    """(N,) True where a point is in front, inside the image, faces the camera and is
+    unoccluded: a ray from the
+    camera to the point lifted by VISIBILITY_LIFT along ``normal`` meets no body (ray test
+    in the physics client, which holds every body)."""
     c = T_wc[:3, 3]
+    P_world = P_world + VISIBILITY_LIFT * np.asarray(normal)
     d = P_world - c
     length = np.linalg.norm(d, axis=1)
     u = d / length[:, None]
@@ -246,7 +253,8 @@ def _visible(scene: Scene, T_wc: np.ndarray, P_world: np.ndarray, uv: np.ndarray
                           physicsClientId=scene.physics.client)
     free = np.array([h[0] < 0 or h[2] * (L - RAY_START) >= (L - RAY_START) - VISIBILITY_MARGIN
                      for h, L in zip(hits, length, strict=True)])
-    return (Z > 0) & cam.intrinsics.in_image(uv) & free
+    facing = (c - P_world) @ np.asarray(normal) > 0  # the camera sees the dot's front face
+    return (Z > 0) & cam.intrinsics.in_image(uv) & free & facing
 
 
 # ----------------------------------------------------------------------------- the loop
@@ -288,7 +296,7 @@ class _Runner:
             row[c] = v
         P = target.points_world(body.T_world)
         uv_true, _ = project_points(cam.camera.intrinsics, T_wc, P)
-        visible = _visible(scene, T_wc, P, uv_true, Z, cam.camera)
+        visible = _visible(scene, T_wc, P, body.T_world[:3, 2], uv_true, Z, cam.camera)
         err = np.where(found, np.linalg.norm(uv - uv_true, axis=1), np.nan)
         a = self.audit[cam.name]
         with np.errstate(invalid="ignore"):

@@ -36,7 +36,12 @@ import pybullet as p
 import pybullet_data
 
 from repro.errors import ConfigError, UnknownChoiceError
-from repro.sensors.camera import DotTarget, move_dot_target, spawn_dot_target
+from repro.sensors.camera import (
+    DotTarget,
+    cylinder_visual_shape,
+    move_dot_target,
+    spawn_dot_target,
+)
 from repro.sim.robot import URDF_LOAD_FLAGS, JointLimits, Robot
 from repro.sim.world import World, WorldConfig, pose_to_pb
 
@@ -124,8 +129,8 @@ def _create_shape(client: int, part: Part, rgba: Sequence[float], collision: boo
         if collision:
             col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
     elif part.shape == "cylinder":
-        vis = p.createVisualShape(p.GEOM_CYLINDER, radius=s[0], length=s[1],
-                                  rgbaColor=list(rgba), physicsClientId=client)
+        # TinyRenderer draws p.GEOM_CYLINDER 1 mm too big all round: an exact mesh instead.
+        vis = cylinder_visual_shape(client, s[0], s[1], rgba)
         if collision:
             col = p.createCollisionShape(p.GEOM_CYLINDER, radius=s[0], height=s[1],
                                          physicsClientId=client)
