@@ -40,7 +40,7 @@ bench: $(STAMP)  ## controller-step, QP, NMPC and sensor timings -> results/benc
 
 lint: $(STAMP)  ## ruff and mypy
 	$(BIN)/ruff check repro experiments tests
-	$(BIN)/mypy repro
+	$(BIN)/mypy repro experiments
 
 clean:  ## remove the virtual environment and caches (results and figures are kept)
 	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -30,7 +30,7 @@ from repro.sim.world import World
 
 REF_DIR = Path(__file__).parent / "reference" / "chan2011"
 SHORT = {"simulation": 0.3, "experiment": 2.0, "ibvs": 0.3, "ibvs_saturated": 0.3}
-TIMING_COLUMNS = ("solve_s",)
+TIMING_COLUMNS = ("solve_s", "ctrl_s", "camera_render_s")
 
 
 def short_config(name: str) -> object:

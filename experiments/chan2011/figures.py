@@ -53,7 +53,7 @@ def image_trajectory(run: RunFiles, title: str, ax: plt.Axes | None = None) -> p
         ax.plot(pd_[j, 0], pd_[j, 1], "x", color=COLORS[j], ms=5)
     _image_axes(ax, run)
     ax.set_title(title)
-    return fig
+    return fig  # type: ignore[return-value]
 
 
 def camera_trajectory(run: RunFiles) -> plt.Figure:

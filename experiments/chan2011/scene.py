@@ -68,7 +68,7 @@ def _hue_colors(n: int) -> tuple[tuple[int, int, int], ...]:
     """n saturated colours with hues 360/n deg apart (OpenCV HSV -> RGB)."""
     hsv = np.array([[[int(round(180 * i / n)) % 180, 255, 255] for i in range(n)]], np.uint8)
     rgb = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)[0]
-    return tuple(tuple(int(c) for c in px) for px in rgb)
+    return tuple((int(px[0]), int(px[1]), int(px[2])) for px in rgb)
 
 
 CONROD = DotTarget(points_target=CONROD_POINTS, colors=_hue_colors(N_POINTS),
@@ -168,4 +168,5 @@ def goal_flange_pose(setting: Setting) -> np.ndarray:
     ``approach`` (a unit vector from the conrod towards the flange). The reference image
     is what the real camera sees from there."""
     centre = (setting.T_object_actual @ np.array([-0.075, 0.0, 0.016, 1.0]))[:3]
-    return look_at_flange_pose(centre, setting.approach, setting.standoff, setting.approach_yaw)
+    return look_at_flange_pose(centre, np.asarray(setting.approach), setting.standoff,
+                               setting.approach_yaw)

@@ -243,7 +243,8 @@ class VisualNMPC:
     """
 
     def __init__(self, fk_camera: ca.Function, intrinsics: Intrinsics, n_points: int,
-                 q_min: Sequence[float], q_max: Sequence[float], qd_max: Sequence[float],
+                 q_min: Sequence[float] | np.ndarray, q_max: Sequence[float] | np.ndarray,
+                 qd_max: Sequence[float] | np.ndarray,
                  config: NMPCConfig | None = None, *, image_bounds: ImageBounds) -> None:
         self.config = cfg = NMPCConfig() if config is None else config
         self.intrinsics = intrinsics

@@ -26,7 +26,7 @@ equations and nothing else. The runner owns everything else, identically for eve
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -107,7 +107,7 @@ class Sensor(Protocol):
         """The measurement at time ``t`` with the robots at ``q`` (by robot name)."""
         ...
 
-    def columns(self, reading: Any) -> dict[str, Scalar]:
+    def columns(self, reading: Any) -> Mapping[str, Scalar]:
         """Trace columns of a measurement (declared by the paper)."""
         ...
 
@@ -171,7 +171,7 @@ class Episode:
     columns: Columns  # the paper's own columns (controller and sensor columns)
     duration: float  # [s]
     cameras: list[CameraRig] = field(default_factory=list)
-    sensors: list[Sensor] = field(default_factory=list)
+    sensors: Sequence[Sensor] = field(default_factory=list)
     movers: dict[str, Callable[[float], np.ndarray]] = field(default_factory=dict)
     video: bool = False
     video_every: int = 3  # control steps between video frames
@@ -257,6 +257,24 @@ def _visible(scene: Scene, T_wc: np.ndarray, P_world: np.ndarray, normal: np.nda
     return (Z > 0) & cam.intrinsics.in_image(uv) & free & facing
 
 
+@dataclass
+class _Audit:
+    """Counts of one camera's audit over a run (written to the manifest's summary)."""
+
+    mismatch_rows: int = 0
+    hidden_found_rows: int = 0
+    max_err_px: float = 0.0
+    points_mismatched: set[int] = field(default_factory=set)
+    points_hidden_found: set[int] = field(default_factory=set)
+
+    def summary(self) -> dict[str, Any]:
+        return {"mismatch_rows": self.mismatch_rows, "hidden_found_rows": self.hidden_found_rows,
+                "max_err_px": self.max_err_px,
+                "points_mismatched": sorted(self.points_mismatched),
+                "points_hidden_found": sorted(self.points_hidden_found),
+                "controller_used_wrong_feature": self.mismatch_rows > 0}
+
+
 # ----------------------------------------------------------------------------- the loop
 class _Runner:
     def __init__(self, ep: Episode, rec: TraceRecorder, out_dir: Path) -> None:
@@ -264,11 +282,9 @@ class _Runner:
         self.cols = runner_columns(ep).extend(ep.columns)
         self.robots = {name: d.robot for name, d in ep.drives.items()}
         self.frames: list[np.ndarray] = []
-        self.audit = {c.name: {"mismatch_rows": 0, "hidden_found_rows": 0, "max_err_px": 0.0,
-                               "points_mismatched": set(), "points_hidden_found": set()}
-                      for c in ep.cameras}
+        self.audit = {c.name: _Audit() for c in ep.cameras}
         self._flags: dict[str, bool] = {}
-        self.collided: set[str] = set()
+        self.collided: set[tuple[str, str]] = set()
         self.t_ctrl = 0.0
 
     def onset(self, key: str, now: bool, t: float, k: int, kind: str, detail: str,
@@ -302,10 +318,10 @@ class _Runner:
         with np.errstate(invalid="ignore"):
             bad = found & ~(err <= cam.tol_px)
         hidden = found & ~visible
-        a["mismatch_rows"] += int(bad.any())
-        a["hidden_found_rows"] += int(hidden.any())
+        a.mismatch_rows += int(bad.any())
+        a.hidden_found_rows += int(hidden.any())
         if found.any():
-            a["max_err_px"] = max(a["max_err_px"], float(np.nanmax(err)))
+            a.max_err_px = max(a.max_err_px, float(np.nanmax(err)))
         for i in range(target.n_points):
             j, s = i + 1, f"{cam.prefix}{i + 1}"
             row[f"{s}_u"], row[f"{s}_v"] = float(uv[i, 0]), float(uv[i, 1])
@@ -314,9 +330,9 @@ class _Runner:
             row[f"{s}_visible"] = bool(visible[i])
             row[f"{s}_err_px"] = float(err[i])
             if bad[i]:
-                a["points_mismatched"].add(j)
+                a.points_mismatched.add(j)
             if hidden[i]:
-                a["points_hidden_found"].add(j)
+                a.points_hidden_found.add(j)
             self.onset(f"{s}_mismatch", bool(bad[i]), t, k, "feature_mismatch",
                        f"{cam.name} point {j} detected {err[i]:.1f} px from the projection "
                        f"of its model point (tolerance {cam.tol_px} px)",
@@ -335,16 +351,16 @@ class _Runner:
             for body, d in dists.items():
                 row[f"{pre}dist_{body}"] = d
                 if d <= 0.0 and (name, body) not in self.collided:
-                    self.collided.add((name, body))  # type: ignore[arg-type]
+                    self.collided.add((name, body))
                     self.rec.summary[f"collided_{body}"] = True
                     self.rec.event(t, k, "collision", f"{name} touches {body} "
                                    f"(distance {d:.4f} m)")
             obstacles = [d for b, d in dists.items()
                          if scene[b].robot is None and scene[b].obstacle]
             row[f"{pre}dist_min"] = min(obstacles) if obstacles else float("nan")
-        for body in scene.moving_bodies():
-            pos, quat = pose_to_pb(body.T_world)
-            for c, v in zip(pose_columns(body.name), pos + quat, strict=True):
+        for moving in scene.moving_bodies():
+            pos, quat = pose_to_pb(moving.T_world)
+            for c, v in zip(pose_columns(moving.name), pos + quat, strict=True):
                 row[c] = v
 
     def snapshot(self, k: int) -> None:
@@ -383,8 +399,9 @@ class _Runner:
                     rec.event(t, k, kind, detail)
             tic = time.perf_counter()
             res = ep.controller(Observation(t, k, q, qd, feats, readings))
-            row["ctrl_s"] = time.perf_counter() - tic
-            self.t_ctrl += row["ctrl_s"]
+            t_ctrl = time.perf_counter() - tic
+            row["ctrl_s"] = t_ctrl
+            self.t_ctrl += t_ctrl
             row.update(res.columns)
             for kind, detail in res.events:
                 rec.event(t, k, kind, detail)
@@ -425,15 +442,12 @@ class _Runner:
                 world.step_physics()
         rec.summary.update({"n_steps": k + 1, "sim_time_s": k * dt,
                             "mean_control_s": self.t_ctrl / (k + 1), "stop_reason": reason})
-        rec.summary["audit"] = {
-            name: {**a, "points_mismatched": sorted(a["points_mismatched"]),
-                   "points_hidden_found": sorted(a["points_hidden_found"]),
-                   "controller_used_wrong_feature": a["mismatch_rows"] > 0}
-            for name, a in self.audit.items()}
+        rec.summary["audit"] = {name: a.summary() for name, a in self.audit.items()}
         if self.frames:
             import imageio.v2 as imageio
 
-            imageio.mimsave(self.out_dir / "video.gif", self.frames, duration=ep.video_every * dt)
+            imageio.mimsave(self.out_dir / "video.gif", list(self.frames),  # type: ignore[arg-type]
+                            duration=ep.video_every * dt)
         return status, reason
 
 

@@ -288,7 +288,8 @@ class Scene:
         rgba = tuple(float(c) for c in rgba)
         if len(rgba) != 4 or not all(0.0 <= c <= 1.0 for c in rgba):
             raise ConfigError(f"rgba of {name!r} must be 4 numbers in [0, 1], got {rgba}")
-        ids, render_ids = [], []
+        ids: list[int] = []
+        render_ids: list[int] = []
         clients = [(self.physics.client, ids, collision)]
         if render and self.mirror is not None:
             clients.append((self.mirror.client, render_ids, False))
