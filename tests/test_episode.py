@@ -252,3 +252,19 @@ def test_audit_flags_a_hidden_point_reported_found(tmp_path: Path) -> None:
     # the exact camera mode does not know about occlusion: the audit does
     assert run.manifest["summary"]["audit"]["camera"]["points_hidden_found"] == [1]
     assert (run.events["kind"] == "hidden_found").sum() == 1
+
+
+def test_video_and_snapshots_are_written_for_any_episode(tmp_path: Path) -> None:
+    scene = _scene(tmp_path, 1 / 240, 1 / 30, render=True)
+    robot = scene.add_urdf("crs", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
+    robot.reset(Q0)
+    scene.add_box("box", (0.1, 0.1, 0.1), trans(0.4, 0.0, 0.2), GREY)
+    _run(Episode(scene, {"crs": VelocityDrive(robot)},
+                 lambda obs: StepResult({"crs": np.full(6, 0.2)}), Columns(), 0.3, video=True,
+                 video_every=2, snapshot_period=0.1), tmp_path)
+    import imageio.v2 as imageio
+
+    frames = imageio.mimread(tmp_path / "video.gif")
+    assert len(frames) == 5  # rows 0, 2, 4, 6, 8 of 10
+    assert len(list((tmp_path / "frames").glob("scene_*.png"))) == 4
+    assert not np.array_equal(frames[0], frames[-1])  # the robot moved

@@ -145,8 +145,8 @@ class Chan2011Controller:
         if not f.found.all():
             return StepResult({"crs_a465": np.zeros(self.robot.n)},
                               {**cols, "status": "no_features", "e_rms_px": float("nan")}, [],
-                              ("feature_lost", f"points {np.flatnonzero(~f.found).tolist()} not "
-                               "found; run stopped"))
+                              ("feature_lost", f"points {(np.flatnonzero(~f.found) + 1).tolist()} "
+                               "(1-based) not found; run stopped"))
         p_k = f.uv.ravel()
         e_rms = float(np.sqrt(np.mean(np.sum((p_k - self.p_d).reshape(N, 2) ** 2, axis=1))))
         tic = time.perf_counter()

@@ -141,8 +141,8 @@ class Thomas2024Controller:
                         [obs.sensors[name] for name in RING_NAMES])
         events, stop = [], None
         if not f.found.all() and self.prev_status != "no_features":
-            events.append(("feature_lost", f"dots not found: {np.flatnonzero(~f.found).tolist()};"
-                           " fallback u = 0"))
+            events.append(("feature_lost", f"dots not found (1-based): "
+                           f"{(np.flatnonzero(~f.found) + 1).tolist()}; fallback u = 0"))
         if out.status != self.prev_status and out.status not in ("solved", "no_features"):
             events.append(("qp_" + out.status, f"hard QP {out.qp_status}; " + (
                 f"slack-relaxed CBFs, max slack {out.max_slack:.3g} m/s"
