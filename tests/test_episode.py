@@ -268,3 +268,16 @@ def test_video_and_snapshots_are_written_for_any_episode(tmp_path: Path) -> None
     assert len(frames) == 5  # rows 0, 2, 4, 6, 8 of 10
     assert len(list((tmp_path / "frames").glob("scene_*.png"))) == 4
     assert not np.array_equal(frames[0], frames[-1])  # the robot moved
+
+
+def test_a_missed_point_gets_its_ground_truth_cause(tmp_path: Path) -> None:
+    scene, rig = _camera_scene(tmp_path, occluder=False)
+    rig.camera = Camera(Intrinsics(320, 240, 300.0, 300.0, -20.0, 119.5), mode="exact")
+    run = _run(Episode(scene, {"crs": VelocityDrive(rig.robot)},
+                       lambda obs: StepResult({"crs": np.zeros(6)}), Columns(), 0.1,
+                       cameras=[rig]), tmp_path)
+    missed = run.events[run.events["kind"] == "feature_missed"]
+    # the principal point far left: the left column of dots projects outside the image
+    lost = [c for c in ("s1", "s2", "s3", "s4") if not run.trace[f"{c}_found"].any()]
+    assert lost and len(missed) == len(lost)
+    assert missed["detail"].str.contains("outside the image").all()

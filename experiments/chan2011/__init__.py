@@ -14,6 +14,8 @@ EXPERIMENTS = Paper(
     experiments=(
         Experiment("simulation", "chan2011", "Sec. III: NMPC, Np = 5, dt = 10 ms (Figs. 3-6)",
                    _c.SimulationConfig, run),
+        Experiment("simulation_render", "chan2011", "Beyond the paper: the Sec. III task "
+                   "with the rendered camera and dot detection", _c.SimulationRenderConfig, run),
         Experiment("experiment", "chan2011", "Sec. V: conrod among four obstacles, Np = 10, "
                    "dt = 0.1 s, 5 % speeds, DCC (Figs. 12-13)", _c.ExperimentConfig, run),
         Experiment("ibvs", "chan2011", "Baseline: classical IBVS on the simulation task",

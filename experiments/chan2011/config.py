@@ -53,7 +53,17 @@ class Chan2011Config:
 
 @dataclass(frozen=True)
 class SimulationConfig(Chan2011Config):
-    """chan2011 Sec. III: Np = 5, Nc = 1, dt = 10 ms, Q = I, W = 2500 I."""
+    """chan2011 Sec. III: Np = 5, Nc = 1, dt = 10 ms, Q = I, W = 2500 I; ideal point features
+    (exact projection), as in the paper's simulation."""
+
+    camera_mode: str = param("exact", choices=("render", "exact"),
+                             help="Sec. III simulates ideal point features")
+
+
+@dataclass(frozen=True)
+class SimulationRenderConfig(Chan2011Config):
+    """The Sec. III task with the rendered camera and OpenCV detection (ours: beyond the
+    paper, whose simulation projects ideal points)."""
 
 
 @dataclass(frozen=True)

@@ -275,6 +275,20 @@ class _Audit:
                 "controller_used_wrong_feature": self.mismatch_rows > 0}
 
 
+def _why_missed(in_view: bool, visible: bool, c: np.ndarray, P: np.ndarray,
+                normal: np.ndarray) -> str:
+    """Ground-truth cause of a missed detection (for the feature_missed event)."""
+    if not in_view:
+        return "its projection is outside the image (or behind the camera)"
+    d = c - P
+    angle = float(np.degrees(np.arccos(np.clip(d @ normal / np.linalg.norm(d), -1.0, 1.0))))
+    if not visible:
+        return (f"seen from behind ({angle:.0f} deg from its normal)" if angle >= 90
+                else "occluded by a body between it and the camera")
+    return f"visible, seen at {angle:.0f} deg from its normal" + (
+        " (grazing: a flat dot's image is a sliver)" if angle > 75 else "")
+
+
 # ----------------------------------------------------------------------------- the loop
 class _Runner:
     def __init__(self, ep: Episode, rec: TraceRecorder, out_dir: Path) -> None:
@@ -337,6 +351,14 @@ class _Runner:
                        f"{cam.name} point {j} detected {err[i]:.1f} px from the projection "
                        f"of its model point (tolerance {cam.tol_px} px)",
                        f"{cam.name} point {j} back within {cam.tol_px} px")
+            if not found[i]:
+                cause = _why_missed(bool(Z[i] > 0 and cam.camera.intrinsics.in_image(
+                    uv_true[i:i + 1])[0]), bool(visible[i]), T_wc[:3, 3], P[i],
+                    body.T_world[:3, 2])
+            self.onset(f"{s}_missed", not found[i], t, k, "feature_missed",
+                       f"audit: {cam.name} point {j} not detected; ground truth: "
+                       f"{cause if not found[i] else ''}",
+                       f"{cam.name} point {j} detected again")
             self.onset(f"{s}_hidden", bool(hidden[i]), t, k, "hidden_found",
                        f"{cam.name} point {j} reported found but its model point is not "
                        "visible (occluded or outside the image)",
