@@ -29,7 +29,8 @@ from repro.sim.crs_a465 import CRS_JOINTS, CRS_LIMITS, T_FLANGE_CAMERA, crs_urdf
 from repro.sim.world import World
 
 REF_DIR = Path(__file__).parent / "reference" / "chan2011"
-SHORT = {"simulation": 0.3, "simulation_render": 0.3, "experiment": 2.0, "ibvs": 0.3, "ibvs_saturated": 0.3}
+SHORT = {"simulation": 0.3, "simulation_render": 0.3, "experiment": 2.0, "ibvs": 0.3,
+         "ibvs_saturated": 0.3}
 TIMING_COLUMNS = ("solve_s", "ctrl_s", "camera_render_s")
 
 
