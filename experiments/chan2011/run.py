@@ -210,7 +210,7 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
     ctrl = Chan2011Controller(config, robot, setting, uv_d.ravel(), nmpc, dcc)
     scene.extra.update(
         desired_pixels=uv_d, q_goal_deg=np.rad2deg(q_goal), q0_deg=setting.q0_deg,
-        controller_model={"intrinsics_table_I": sc.TABLE_I, "T_flange_camera": T_FLANGE_CAMERA,
+        controller_model={"table_I": sc.TABLE_I, "T_flange_camera": T_FLANGE_CAMERA,
                           "T_base_object_estimate": setting.T_object_estimate,
                           "qd_max_used": qd_max},
         dcc_radii=dcc.radii() if dcc is not None else None)
