@@ -1,9 +1,11 @@
-"""Tests of repro.runs.claims on small synthetic runs written with TraceRecorder."""
+"""Tests of repro.runs.claims on small synthetic runs written with TraceRecorder, checked
+against a small registry of their own (the runs' default configs)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
@@ -13,25 +15,45 @@ from repro.runs.claims import (
     CLAIMS_COLUMNS,
     Claim,
     ClaimResult,
+    RunExtent,
     evaluate_claims,
+    extent_note,
     natural_key,
     read_claims_csv,
+    run_extent,
     write_claims_csv,
 )
+from repro.runs.registry import Experiment, Paper
 from repro.runs.trace import RunFiles, TraceRecorder
 
 
 @dataclass(frozen=True)
 class Cfg:
     gain: float = 2.0
+    duration: float = 0.02  # [s]
 
 
-def _write_run(results: Path, paper: str, run: str, errors: list[float], crash: bool = False):
+RUN_NAMES = ("good", "bad", "crashed", "short", "override")
+
+
+def _papers() -> dict[str, Paper]:
+    """A registry of p2020 whose experiments all have the default config Cfg()."""
+    def run(config: Any, out_dir: Path) -> Path:
+        raise AssertionError("not run in these tests")
+
+    exps = tuple(Experiment(name, "p2020", f"{name} run", Cfg, run) for name in RUN_NAMES)
+    return {"p2020": Paper("p2020", exps)}
+
+
+def _write_run(results: Path, paper: str, run: str, errors: list[float], crash: bool = False,
+               config: Cfg | None = None, sim_time: float | None = None):
     rec = TraceRecorder(
-        results / paper / run, experiment="reach", paper=paper, config=Cfg(), seed=0
+        results / paper / run, experiment=run, paper=paper, config=config or Cfg(), seed=0
     )
     for k, err in enumerate(errors):
         rec.record({"t": 0.01 * k, "step": k, "err_m": err})
+    rec.summary["sim_time_s"] = 0.01 * (len(errors) - 1) if sim_time is None else sim_time
+    rec.summary["stop_reason"] = "duration reached" if sim_time is None else "target lost"
     if crash:
         rec.close(status="crashed", reason="RuntimeError: boom")
     else:
@@ -63,6 +85,8 @@ def results(tmp_path: Path) -> Path:
     _write_run(tmp_path, "p2020", "good", [0.004, 0.002, 0.001])
     _write_run(tmp_path, "p2020", "bad", [0.004, 0.009, 0.003])
     _write_run(tmp_path, "p2020", "crashed", [0.001], crash=True)
+    _write_run(tmp_path, "p2020", "short", [0.004, 0.002], sim_time=0.01)
+    _write_run(tmp_path, "p2020", "override", [0.001, 0.001, 0.001], config=Cfg(gain=9.0))
     return tmp_path
 
 
@@ -79,7 +103,7 @@ def test_evaluate_claims_statuses(results: Path) -> None:
         _claim("5", ("crashed",), _max_err_below("crashed", 0.005)),
         _claim("6", ("good",), lambda runs: "reproduced"),
     ]
-    df = evaluate_claims(claims, results)
+    df = evaluate_claims(claims, results, _papers())
     assert tuple(df.columns) == CLAIMS_COLUMNS
     assert df["claim"].tolist() == ["1", "2", "3", "4", "5", "6"]
     status = dict(zip(df["claim"], df["status"], strict=True))
@@ -103,9 +127,83 @@ def test_evaluate_claims_statuses(results: Path) -> None:
 
 def test_run_with_missing_file_is_not_run(results: Path) -> None:
     (results / "p2020" / "good" / "scene.json").unlink()
-    df = evaluate_claims([_claim("1", ("good",), _max_err_below("good", 0.005))], results)
+    df = evaluate_claims([_claim("1", ("good",), _max_err_below("good", 0.005))], results,
+                         _papers())
     assert df.loc[0, "status"] == "not_run"
     assert "scene.json" in df.loc[0, "measured"]
+
+
+def test_run_with_another_config_is_not_run(results: Path) -> None:
+    """An override run written into the default folder never decides a claim."""
+    claim = _claim("1", ("override",), _max_err_below("override", 0.005))
+    df = evaluate_claims([claim], results, _papers())
+    assert df.loc[0, "status"] == "not_run"
+    text = df.loc[0, "measured"]
+    assert "another config" in text and "p2020.override" in text and "repro run" in text
+    # the same run is accepted once the registered default is its config
+    papers = _papers()
+    exps = tuple(Experiment(e.name, e.paper, e.description,
+                            (lambda: Cfg(gain=9.0)) if e.name == "override" else Cfg, e.run)
+                 for e in papers["p2020"].experiments)
+    papers["p2020"] = Paper("p2020", exps)
+    df = evaluate_claims([claim], results, papers)
+    assert df.loc[0, "status"] == "reproduced"
+
+
+def test_unregistered_run_or_paper_is_not_run(results: Path) -> None:
+    papers = _papers()
+    papers["p2020"] = Paper("p2020", papers["p2020"].experiments[1:])  # no "good"
+    df = evaluate_claims([_claim("1", ("good",), _max_err_below("good", 0.005))], results,
+                         papers)
+    assert df.loc[0, "status"] == "not_run"
+    assert "not a registered experiment" in df.loc[0, "measured"]
+    df = evaluate_claims([_claim("1", ("good",), _max_err_below("good", 0.005))], results, {})
+    assert df.loc[0, "status"] == "not_run" and "not registered" in df.loc[0, "measured"]
+
+
+def test_default_registry_is_the_installed_one(results: Path) -> None:
+    """Without papers, the registry's entry points decide: p2020 is not among them."""
+    df = evaluate_claims([_claim("1", ("good",), _max_err_below("good", 0.005))], results)
+    assert df.loc[0, "status"] == "not_run" and "p2020" in df.loc[0, "measured"]
+
+
+def test_run_that_ended_early(results: Path) -> None:
+    """A run that ended before its duration is named; a whole-run claim cannot pass on it."""
+    part = _claim("1", ("short",), _max_err_below("short", 0.005))
+    whole = Claim("p2020", "2", "d", "e", ("short",), _max_err_below("short", 0.005),
+                  whole_run=("short",))
+    failing = Claim("p2020", "3", "d", "e", ("short",), _max_err_below("short", 0.001),
+                    whole_run=("short",))
+    full = Claim("p2020", "4", "d", "e", ("good",), _max_err_below("good", 0.005),
+                 whole_run=("good",))
+    df = evaluate_claims([part, whole, failing, full], results, _papers())
+    status = df["status"].tolist()
+    measured = df["measured"].tolist()
+    assert status == ["reproduced", "not_reproduced", "not_reproduced", "reproduced"]
+    assert "short ended at 0.01 s of its 0.02 s (target lost)" in measured[0]
+    assert "judged on what ran" in measured[0]
+    assert "covers the whole run" in measured[1] and "0.0 s that never ran" in measured[1]
+    assert measured[2].startswith("max error 4.0 mm") and "covers the whole run" in measured[2]
+    assert measured[3] == "max error 4.0 mm"
+
+
+def test_run_extent() -> None:
+    def run(t: list[float], summary: dict, config: dict) -> RunFiles:
+        return RunFiles(pd.DataFrame({"t": t}), pd.DataFrame(),
+                        {"summary": summary, "config": config}, {})
+
+    full = run_extent(run([0.0, 0.1, 0.2], {"sim_time_s": 0.2}, {"duration": 0.2}))
+    assert not full.ended_early and full.missing_s == 0.0 and full.step_s == pytest.approx(0.1)
+    # within half a control period of the duration: not early
+    assert not run_extent(run([0.0, 0.1, 0.2], {}, {"duration": 0.24})).ended_early
+    short = run_extent(run([0.0, 0.1], {"stop_reason": "lost"}, {"duration": 0.5}))
+    assert short.ended_early and short.missing_s == pytest.approx(0.4)
+    assert short.stop_reason == "lost" and short.sim_time_s == pytest.approx(0.1)
+    assert not run_extent(run([0.0], {}, {})).ended_early  # no duration: an audit, say
+    assert RunExtent(None, 1.0, "x").missing_s == 0.0
+    text, failed = extent_note({"a": run([0.0, 0.1], {}, {"duration": 1.0})}, ("a",))
+    assert failed and "a ended at 0.10 s of its 1 s" in text
+    assert extent_note({"a": run([0.0, 0.1], {}, {"duration": 0.1})}, ("a",)) == ("", False)
 
 
 def test_claim_validation() -> None:
@@ -116,6 +214,10 @@ def test_claim_validation() -> None:
     with pytest.raises(ConfigError):
         _claim("1", "good", _raise)  # type: ignore[arg-type]
     assert _claim("1", ["a", "b"], _raise).runs == ("a", "b")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="not among its runs"):
+        Claim("p", "1", "d", "e", ("a",), _raise, whole_run=("b",))
+    with pytest.raises(ConfigError):
+        Claim("p", "1", "d", "e", ("a",), _raise, whole_run="a")  # type: ignore[arg-type]
 
 
 def _table(paper: str, claims: list[str], status: str = "reproduced") -> pd.DataFrame:
@@ -153,7 +255,8 @@ def test_write_claims_csv_validates(tmp_path: Path) -> None:
 
 
 def test_evaluated_table_writes_and_reads_back(results: Path) -> None:
-    df = evaluate_claims([_claim("1", ("good",), _max_err_below("good", 0.005))], results)
+    df = evaluate_claims([_claim("1", ("good",), _max_err_below("good", 0.005))], results,
+                         _papers())
     write_claims_csv(df, results / "claims.csv")
     back = read_claims_csv(results / "claims.csv")
     pd.testing.assert_frame_equal(back, df)

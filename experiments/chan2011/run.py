@@ -94,7 +94,9 @@ class Chan2011Controller:
         sat = self.qd_max if self.config.controller == "ibvs_saturated" else None
         return ibvs_joint_velocity(J_s, (x - xd).ravel(), self.config.ibvs_gain, sat)
 
-    def _nmpc(self, q: np.ndarray, p_k: np.ndarray, cols: dict, events: list) -> np.ndarray:
+    def _nmpc(self, q: np.ndarray, p_k: np.ndarray, cols: dict, events: list
+              ) -> tuple[np.ndarray, bool]:
+        """(qdot, solved): the NMPC command, or zeros when no solve succeeded."""
         assert self.nmpc is not None
         s, P = self.setting, sc.CONROD_POINTS
         d_k = self.nmpc.disturbance(p_k, q, s.T_object_estimate, P)  # eq. (11)
@@ -134,8 +136,8 @@ class Chan2011Controller:
                     cost=sol.cost, max_violation=sol.max_violation)
         if not sol.success:
             events.append(("nmpc_failed", f"{sol.status}; fallback qdot = 0"))
-            return np.zeros(self.robot.n)
-        return sol.qdot
+            return np.zeros(self.robot.n), False
+        return sol.qdot, True
 
     def __call__(self, obs: Observation) -> StepResult:
         q, f = obs.q["crs_a465"], obs.features["camera"]
@@ -146,14 +148,15 @@ class Chan2011Controller:
             return StepResult({"crs_a465": np.zeros(self.robot.n)},
                               {**cols, "status": "no_features", "e_rms_px": float("nan")}, [],
                               ("feature_lost", f"points {(np.flatnonzero(~f.found) + 1).tolist()} "
-                               "(1-based) not found; run stopped"))
+                               "(1-based) not found; run stopped"), fallback=True)
         p_k = f.uv.ravel()
         e_rms = float(np.sqrt(np.mean(np.sum((p_k - self.p_d).reshape(N, 2) ** 2, axis=1))))
         tic = time.perf_counter()
         if self.nmpc is not None:
-            qdot = self._nmpc(q, p_k, cols, events)
+            qdot, solved = self._nmpc(q, p_k, cols, events)
+            fallback = not solved
         else:
-            qdot = self._ibvs(q, p_k)
+            qdot, fallback = self._ibvs(q, p_k), False
             cols.update(status=self.config.controller, iterations=0,
                         solve_s=time.perf_counter() - tic)
         cols["e_rms_px"] = e_rms
@@ -162,7 +165,7 @@ class Chan2011Controller:
             e_rms < self.config.stop_px) else None
         if self.below_since is not None and obs.t - self.below_since >= 0.2:
             stop = ("converged", f"converged: RMS pixel error < {self.config.stop_px} px for 0.2 s")
-        return StepResult({"crs_a465": qdot}, cols, events, stop)
+        return StepResult({"crs_a465": qdot}, cols, events, stop, fallback=fallback)
 
 
 def build(config: Chan2011Config, out_dir: Path) -> Episode:

@@ -164,7 +164,8 @@ class Thomas2024Controller:
             cols[f"r{i // sc.N_SENSORS + 1}_kappa{i % sc.N_SENSORS + 1}"] = float(kap)
         cols.update(qp_status=out.status, qp_iter=out.iterations, qp_max_slack=out.max_slack,
                     qp_solve_s=out.solve_s, grad_L0=out.grad_L0)
-        return StepResult({"panda": out.u}, cols, events, stop)
+        return StepResult({"panda": out.u}, cols, events, stop,
+                          fallback=out.status in ("failed", "no_features"))
 
 
 def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024Controller]:

@@ -2,13 +2,25 @@
 
 A :class:`Claim` names the run directories it needs (under ``results/<paper>/``) and a check
 that turns their :class:`~repro.runs.trace.RunFiles` into a :class:`ClaimResult`. The table
-never crashes: a missing or unfinished run, or a check that raises, gives status ``"not_run"``
-with the reason in ``measured``.
+never crashes: a missing or unfinished run, a run made with another configuration than the
+registered experiment's default, or a check that raises, gives status ``"not_run"`` with the
+reason in ``measured``.
+
+Each run directory ``results/<paper>/<name>`` must be the default run of the registered
+experiment ``<paper>.<name>`` (:mod:`repro.runs.registry`): its manifest's ``config_hash``
+must equal the hash of that experiment's default config, so that an override run written into
+the default folder (a 3 s test run, a changed gain) never decides a claim.
+
+A run that ended before its configured ``duration`` (manifest ``summary.sim_time_s`` against
+``config.duration``: a lost feature, a stop test) is named in ``measured``. A claim lists in
+:attr:`Claim.whole_run` the runs it needs in full ("never", "the whole time"): on those, an
+early end makes the claim ``"not_reproduced"`` -- it cannot hold on the part that never ran.
 """
 
 from __future__ import annotations
 
 import csv
+import math
 import os
 import re
 from collections.abc import Callable, Mapping, Sequence
@@ -18,6 +30,7 @@ from pathlib import Path
 import pandas as pd
 
 from repro.errors import ConfigError, ReproError, UnknownChoiceError
+from repro.runs.registry import Paper, compute_config_hash, load_papers
 from repro.runs.trace import RunFiles, load_run
 
 __all__ = [
@@ -25,7 +38,11 @@ __all__ = [
     "STATUSES",
     "Claim",
     "ClaimResult",
+    "RunExtent",
+    "audit_note",
     "evaluate_claims",
+    "extent_note",
+    "run_extent",
     "natural_key",
     "read_claims_csv",
     "validate_claims_table",
@@ -64,8 +81,12 @@ class Claim:
         claim: claim id within the paper, e.g. "1" or "2b".
         description: what the paper states.
         expected: the paper's value or bound, with units.
-        runs: run-directory names relative to results/<paper>/ that the check needs.
+        runs: run-directory names relative to results/<paper>/ that the check needs; each is
+            also the name of a registered experiment of ``paper``.
         check: maps {run name: RunFiles} to a ClaimResult.
+        whole_run: the runs of ``runs`` the claim needs up to their configured duration (it
+            speaks of the whole motion: "never", "the whole time"); if one of them ended
+            early, the claim is not reproduced.
     """
 
     paper: str
@@ -74,6 +95,7 @@ class Claim:
     expected: str
     runs: tuple[str, ...]
     check: Callable[[dict[str, RunFiles]], ClaimResult]
+    whole_run: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("paper", "claim"):
@@ -95,6 +117,93 @@ class Claim:
                 raise ConfigError(f"claim run must be a relative directory name, got {run!r}")
         if not callable(self.check):
             raise ConfigError(f"claim check must be callable, got {self.check!r}")
+        if isinstance(self.whole_run, str):
+            raise ConfigError(
+                f"claim whole_run must be a sequence of names, got the string {self.whole_run!r}"
+            )
+        object.__setattr__(self, "whole_run", tuple(self.whole_run))
+        unknown = [run for run in self.whole_run if run not in self.runs]
+        if unknown:
+            raise ConfigError(
+                f"claim whole_run names {unknown}, which are not among its runs {list(self.runs)}"
+            )
+
+
+@dataclass(frozen=True)
+class RunExtent:
+    """How much of its configured duration a run covered.
+
+    Attributes:
+        sim_time_s: simulated time at the last row [s] (manifest ``summary.sim_time_s``, else
+            the trace's last ``t``), None if unknown.
+        duration_s: the configured duration [s] (manifest ``config.duration``), None if the
+            run has none (e.g. an audit over random samples).
+        stop_reason: why the run stopped (manifest ``summary.stop_reason`` or ``reason``).
+        step_s: the control period [s] (median step of the trace's ``t``), 0 if unknown.
+    """
+
+    sim_time_s: float | None
+    duration_s: float | None
+    stop_reason: str
+    step_s: float = 0.0
+
+    @property
+    def ended_early(self) -> bool:
+        """True if the run stopped more than half a control period before its duration."""
+        if self.sim_time_s is None or self.duration_s is None:
+            return False
+        return self.sim_time_s < self.duration_s - max(0.5 * self.step_s, 1e-9)
+
+    @property
+    def missing_s(self) -> float:
+        """Simulated time that never ran [s] (0 if the run reached its duration)."""
+        if not self.ended_early:
+            return 0.0
+        assert self.sim_time_s is not None and self.duration_s is not None
+        return self.duration_s - self.sim_time_s
+
+
+def _number(value: object) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return float(value)
+
+
+def run_extent(run: RunFiles) -> RunExtent:
+    """The :class:`RunExtent` of a run, read from its manifest and trace."""
+    summary = run.manifest.get("summary") or {}
+    config = run.manifest.get("config") or {}
+    t = run.trace["t"].to_numpy(float) if "t" in run.trace.columns else None
+    sim_time = _number(summary.get("sim_time_s"))
+    if sim_time is None and t is not None and len(t):
+        sim_time = float(t[-1])
+    step = float(pd.Series(t).diff().median()) if t is not None and len(t) > 1 else 0.0
+    reason = summary.get("stop_reason") or run.manifest.get("reason") or "no reason recorded"
+    return RunExtent(sim_time, _number(config.get("duration")), str(reason),
+                     step if math.isfinite(step) else 0.0)
+
+
+def extent_note(runs: Mapping[str, RunFiles], whole_run: Sequence[str] = ()) -> tuple[str, bool]:
+    """(text for ``measured``, True if a run of ``whole_run`` ended early).
+
+    Names every run that ended before its configured duration, with its stop reason; for a
+    run of ``whole_run`` it adds that the claim cannot be reproduced on the part that never
+    ran. Empty text when every run covered its duration."""
+    notes, failed = [], False
+    for name, run in runs.items():
+        extent = run_extent(run)
+        if not extent.ended_early:
+            continue
+        note = (f"{name} ended at {extent.sim_time_s:.2f} s of its {extent.duration_s:g} s "
+                f"({extent.stop_reason})")
+        if name in whole_run:
+            failed = True
+            note += (f"; the claim covers the whole run: not reproduced on the "
+                     f"{extent.missing_s:.1f} s that never ran")
+        else:
+            note += "; judged on what ran"
+        notes.append(note)
+    return (" [RUN LENGTH: " + "; ".join(notes) + "]") if notes else "", failed
 
 
 def _row(claim: Claim, measured: str, status: str) -> dict[str, str]:
@@ -108,8 +217,24 @@ def _row(claim: Claim, measured: str, status: str) -> dict[str, str]:
     }
 
 
+def _default_hash(papers: Mapping[str, Paper], paper: str, name: str) -> str:
+    """The config hash of the registered experiment ``paper.name``'s default config, or
+    raise ReproError saying why there is none."""
+    if paper not in papers:
+        raise ReproError(f"paper {paper!r} is not registered (registered: {sorted(papers)})")
+    names = [exp.name for exp in papers[paper].experiments]
+    for exp in papers[paper].experiments:
+        if exp.name == name:
+            return compute_config_hash(exp.config_cls())
+    raise ReproError(f"run {name!r} is not a registered experiment of {paper} "
+                     f"(experiments: {', '.join(names)})")
+
+
 def _load_runs(
-    claim: Claim, results_dir: Path, cache: dict[Path, RunFiles | str]
+    claim: Claim,
+    results_dir: Path,
+    cache: dict[Path, RunFiles | str],
+    papers: Callable[[], Mapping[str, Paper]],
 ) -> dict[str, RunFiles] | str:
     """The claim's runs, or a message saying why one is unusable."""
     runs: dict[str, RunFiles] = {}
@@ -130,21 +255,48 @@ def _load_runs(
         if status != "completed":
             reason = loaded.manifest.get("reason") or "no reason recorded"
             return f"run {name!r} did not complete (status {status!r}: {reason})"
+        try:  # load_papers() raises ReproError too if an entry point is broken
+            expected = _default_hash(papers(), claim.paper, name)
+        except ReproError as exc:
+            return f"run {name!r} cannot be matched to an experiment: {exc}"
+        recorded = loaded.manifest.get("config_hash")
+        if recorded != expected:
+            shown = recorded[:12] if isinstance(recorded, str) else recorded
+            return (f"run {name!r} was made with another config than the default of "
+                    f"{claim.paper}.{name} (manifest config_hash {shown!r}, default "
+                    f"{expected[:12]!r}); rerun it with `repro run {claim.paper}.{name}`")
         runs[name] = loaded
     return runs
 
 
-def evaluate_claims(claims: Sequence[Claim], results_dir: Path) -> pd.DataFrame:
+def evaluate_claims(
+    claims: Sequence[Claim], results_dir: Path, papers: Mapping[str, Paper] | None = None
+) -> pd.DataFrame:
     """Check every claim against the runs in results_dir/<paper>/<run>.
+
+    Args:
+        claims: the claims to check.
+        results_dir: the results folder (``results/``).
+        papers: the registered papers whose experiments' default configs the runs must have
+            been made with (default: :func:`repro.runs.registry.load_papers`, read once).
 
     Returns:
         One row per claim, columns CLAIMS_COLUMNS (all strings), in the order of ``claims``.
+        ``measured`` is the check's text, then the runs that ended early
+        (:func:`extent_note`), then the camera-audit warnings (:func:`audit_note`).
     """
     results_dir = Path(results_dir)
     cache: dict[Path, RunFiles | str] = {}
+    registered: list[Mapping[str, Paper]] = [] if papers is None else [papers]
+
+    def get_papers() -> Mapping[str, Paper]:
+        if not registered:
+            registered.append(load_papers())
+        return registered[0]
+
     rows = []
     for claim in claims:
-        runs = _load_runs(claim, results_dir, cache)
+        runs = _load_runs(claim, results_dir, cache, get_papers)
         if isinstance(runs, str):
             rows.append(_row(claim, runs, "not_run"))
             continue
@@ -157,7 +309,9 @@ def evaluate_claims(claims: Sequence[Claim], results_dir: Path) -> pd.DataFrame:
             message = f"check returned {type(result).__name__}, not ClaimResult"
             rows.append(_row(claim, message, "not_run"))
             continue
-        rows.append(_row(claim, result.measured + audit_note(runs), result.status))
+        extent, cut_short = extent_note(runs, claim.whole_run)
+        status = "not_reproduced" if cut_short and result.status == "reproduced" else result.status
+        rows.append(_row(claim, result.measured + extent + audit_note(runs), status))
     return pd.DataFrame(rows, columns=list(CLAIMS_COLUMNS), dtype=object)
 
 

@@ -23,7 +23,7 @@ import pandas as pd
 
 from repro.errors import ReproError
 from repro.runs.claims import STATUSES, natural_key, read_claims_csv
-from repro.runs.trace import TRACKED_PACKAGES, environment, git_state
+from repro.runs.trace import TRACKED_PACKAGES
 
 __all__ = [
     "BENCH_COLUMNS",
@@ -227,33 +227,30 @@ def _display_path(file: str, base: Path) -> str:
 def _provenance(
     manifests: list[dict[str, Any]], now: datetime, source_paths: Sequence[Path]
 ) -> list[str]:
-    env = environment()
-    sha, dirty = None, None
-    for hint in [*(Path(p) for p in source_paths), None]:  # None: the repro package's checkout
-        sha, dirty = git_state(hint)
-        if sha is not None:
-            break
+    # The report is a function of the results: only what the runs recorded, never the
+    # environment that renders the report (its date, sha or platform would churn the file).
     started = sorted(str(m["started_at"]) for m in manifests if m.get("started_at"))
     run_dates = f"{started[0]} … {started[-1]}" if started else _MISSING
     run_shas = _distinct(_fmt_sha(m.get("git_sha"), m.get("git_dirty")) for m in manifests)
     rows = [
-        ("date (UTC)", now.astimezone(UTC).isoformat(timespec="seconds"), run_dates),
-        ("git sha", _fmt_sha(sha, dirty), run_shas),
-        ("python", env["python"], _distinct(m.get("python") for m in manifests)),
-        ("platform", env["platform"], _distinct(m.get("platform") for m in manifests)),
-        ("CPU", env["cpu"], _distinct(m.get("cpu") for m in manifests)),
-        ("repro", env["repro_version"], _distinct(m.get("repro_version") for m in manifests)),
+        ("run dates (UTC)", run_dates),
+        ("git sha", run_shas),
+        ("python", _distinct(m.get("python") for m in manifests)),
+        ("platform", _distinct(m.get("platform") for m in manifests)),
+        ("CPU", _distinct(m.get("cpu") for m in manifests)),
+        ("repro", _distinct(m.get("repro_version") for m in manifests)),
     ]
     for package in TRACKED_PACKAGES:
-        recorded = _distinct((m.get("packages") or {}).get(package) for m in manifests)
-        rows.append((package, env["packages"].get(package, _MISSING), recorded))
+        rows.append((package, _distinct((m.get("packages") or {}).get(package)
+                                        for m in manifests)))
     return [
         "## Provenance",
         "",
-        f"{len(manifests)} run manifest(s) read. The first column is the environment that "
-        "generated this report; the second lists every distinct value the runs recorded.",
+        f"{len(manifests)} run manifest(s) read; every distinct value they recorded. The "
+        "report is rendered from the results alone, so regenerating it without new results "
+        "leaves it unchanged.",
         "",
-        markdown_table(("item", "report environment", "recorded by the runs"), rows),
+        markdown_table(("item", "recorded by the runs"), rows),
         "",
     ]
 
@@ -372,7 +369,7 @@ def render_report(
             to a paper when its path contains the paper key, otherwise to the shared library.
         out_path: the report to write (links are relative to its directory).
         papers: paper keys, in order; default: every paper found in results, figures, claims.
-        now: generation time (default: now, UTC).
+        now: unused (the report depends only on the results); kept for compatibility.
         notes: per paper, a Markdown file of discussion (why a claim did or did not
             reproduce, where the time goes) appended to that paper's section.
 

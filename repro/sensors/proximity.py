@@ -80,6 +80,8 @@ class RingReading:
         invalid: (m,) True where the raw reading was not finite and was replaced.
         true_delta: (m,) noise-free ray-cast distance [m] (ground truth, for the audit
             columns only; max_range when nothing is hit); None when not known.
+        failed: (m,) True where the sensor has given ``max_consecutive_faults`` or more
+            non-finite readings in a row (see :class:`ProximityRing`); None: no fault policy.
     """
 
     delta: np.ndarray
@@ -87,22 +89,38 @@ class RingReading:
     hit_body: np.ndarray
     invalid: np.ndarray
     true_delta: np.ndarray | None = None
+    failed: np.ndarray | None = None
 
 
 class ProximityRing:
     """Ray-cast model of a ring of range finders.
 
+    Fault policy (a non-finite raw reading is a fault; flagged in ``RingReading.invalid``):
+
+    * with ``fault_value`` set (what :class:`RingSensor` does: the ring's threshold delta*),
+      a faulty sensor reads ``fault_value``: an obstacle at the threshold, so its CBF row
+      forbids any motion towards it -- the conservative reading, never "nothing in range";
+      after ``max_consecutive_faults`` faults in a row the sensor has *failed*
+      (``RingReading.failed``) and :meth:`RingSensor.failure` stops the run safely;
+    * with ``fault_value=None`` (legacy), the sensor's last valid reading is held.
+
     Args:
         spec: ring geometry and sensor model.
         rng: random generator for the measurement noise (seeded by the run).
+        fault_value: reading of a faulty sensor [m], or None to hold the last valid one.
+        max_consecutive_faults: faults in a row after which a sensor has failed.
     """
 
-    def __init__(self, spec: RingSpec, rng: np.random.Generator | None = None) -> None:
+    def __init__(self, spec: RingSpec, rng: np.random.Generator | None = None,
+                 fault_value: float | None = None, max_consecutive_faults: int = 3) -> None:
         self.spec = spec
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self._dirs = spec.directions()
         self._origins = spec.origins()
         self._last_valid = np.full(spec.n_sensors, spec.max_range)
+        self.fault_value = fault_value
+        self.max_consecutive_faults = int(max_consecutive_faults)
+        self._fault_run = np.zeros(spec.n_sensors, dtype=int)
 
     def cast(self, client: int, T_world_ring: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Raw ray casts: (distance (m,) [m] or max_range, hit body ids (m,))."""
@@ -136,12 +154,16 @@ class ProximityRing:
             noise = self.rng.normal(0.0, s.noise_std, size=dist.shape)
             noisy[detected] += noise[detected]
         invalid = ~np.isfinite(noisy)
-        noisy[invalid] = self._last_valid[invalid]
+        self._fault_run = np.where(invalid, self._fault_run + 1, 0)
+        noisy[invalid] = (self._last_valid[invalid] if self.fault_value is None
+                          else self.fault_value)
         noisy = np.clip(noisy, s.min_range, s.max_range)
         noisy[~detected & ~invalid] = s.max_range
-        self._last_valid = noisy.copy()
+        self._last_valid = np.where(invalid, self._last_valid, noisy)
+        failed = (self._fault_run >= self.max_consecutive_faults
+                  if self.fault_value is not None else None)
         return RingReading(delta=noisy, detected=detected & ~invalid, hit_body=body,
-                           invalid=invalid)
+                           invalid=invalid, failed=failed)
 
 
 RAY_MODEL = (
@@ -150,7 +172,9 @@ RAY_MODEL = (
     "robot's links (collision group 4) are ignored, every other body is seen; reading = "
     "hit fraction * max_range plus N(0, noise_std) noise on hits only, clipped to "
     "[min_range, max_range]; no hit -> max_range (the 'no detection' value); a non-finite "
-    "reading is replaced by the sensor's last valid one and flagged")
+    "reading is a fault: the sensor reads its ring's threshold delta* (an obstacle at the "
+    "threshold) and the fault is an event; 3 faults in a row and the sensor has failed: "
+    "the run stops safely (zero velocity, status failed)")
 
 
 class RingSensor:
@@ -174,6 +198,7 @@ class RingSensor:
         self.ring, self.robot, self.frame, self.client = ring, robot, frame, client
         self.name = ring.spec.name
         self.prefix, self.threshold, self.on_read = prefix, threshold, on_read
+        ring.fault_value = threshold  # a faulty sensor reads an obstacle at its threshold
 
     def read(self, t: float, q: Mapping[str, np.ndarray]) -> RingReading:
         T = self.robot.frame_pose(self.frame, q[self.robot.name])
@@ -195,9 +220,18 @@ class RingSensor:
 
     def events(self, r: RingReading) -> list[tuple[str, str]]:
         if np.any(r.invalid):
+            held = (f"read as an obstacle at the threshold ({self.threshold} m)"
+                    if self.ring.fault_value is not None else "held their last value")
             return [("sensor_nan", f"{self.name} sensors "
-                     f"{(np.flatnonzero(r.invalid) + 1).tolist()} held last value")]
+                     f"{(np.flatnonzero(r.invalid) + 1).tolist()} non-finite: {held}")]
         return []
+
+    def failure(self, r: RingReading) -> str | None:
+        """A sensor that gave ``max_consecutive_faults`` non-finite readings in a row."""
+        if r.failed is not None and np.any(r.failed):
+            return (f"{self.name} sensors {(np.flatnonzero(r.failed) + 1).tolist()} gave "
+                    f"{self.ring.max_consecutive_faults} non-finite readings in a row")
+        return None
 
     def declare(self, cols: Any) -> None:
         """Declare this ring's columns in a :class:`repro.runs.columns.Columns`."""

@@ -115,6 +115,10 @@ class Sensor(Protocol):
         """Events of a measurement (a sensor fault...)."""
         ...
 
+    def failure(self, reading: Any) -> str | None:
+        """Why the sensor can no longer be trusted (the run then stops safely), or None."""
+        ...
+
 
 @dataclass
 class Observation:
@@ -131,12 +135,15 @@ class Observation:
 @dataclass
 class StepResult:
     """What the controller returns: one command per robot (by name), extra trace columns,
-    events, and a stop request ``(event kind, reason)`` applied after this row."""
+    events, a stop request ``(event kind, reason)`` applied after this row, and whether the
+    command is a fallback (u = 0 after a failed solve or a lost feature) rather than the
+    controller's own: a run in which every step fell back ends ``failed``."""
 
     command: dict[str, np.ndarray]
     columns: dict[str, Scalar] = field(default_factory=dict)
     events: list[tuple[str, str]] = field(default_factory=list)
     stop: tuple[str, str] | None = None
+    fallback: bool = False
 
 
 @dataclass(frozen=True)
@@ -405,8 +412,11 @@ class _Runner:
         n_steps = int(round(ep.duration / dt))
         snap_every = max(1, int(round(ep.snapshot_period / dt))) if ep.snapshot_period else 0
         status, reason = "completed", "duration reached"
+        n_commanded = 0
+        progress = _Progress(n_steps + 1, dt)
         k = 0
         for k in range(n_steps + 1):
+            progress.update(k)
             t = k * dt
             row: dict[str, Scalar] = {"t": t, "step": k}
             for name, T_of_t in ep.movers.items():
@@ -415,10 +425,12 @@ class _Runner:
             qd = {name: r.qd() for name, r in self.robots.items()}
             feats = {c.name: self.measure(c, q[c.robot.name], t, k, row) for c in ep.cameras}
             readings = {s.name: s.read(t, q) for s in ep.sensors}
+            failed_sensor = None
             for s in ep.sensors:
                 row.update(s.columns(readings[s.name]))
                 for kind, detail in s.events(readings[s.name]):
                     rec.event(t, k, kind, detail)
+                failed_sensor = failed_sensor or s.failure(readings[s.name])
             tic = time.perf_counter()
             res = ep.controller(Observation(t, k, q, qd, feats, readings))
             t_ctrl = time.perf_counter() - tic
@@ -428,8 +440,15 @@ class _Runner:
             for kind, detail in res.events:
                 rec.event(t, k, kind, detail)
             stop = res.stop
+            n_commanded += not res.fallback
+            if failed_sensor is not None:  # stop safely: the drives' safe commands
+                status, reason = "failed", f"sensor failure at t = {t:.3f} s: {failed_sensor}"
+                stop = ("sensor_failed", reason + "; safe command sent, run stopped")
+                rec.event(t, k, *stop)
             for name, drive in ep.drives.items():
                 u = np.asarray(res.command.get(name, drive.safe_command()), dtype=float)
+                if failed_sensor is not None:
+                    u = drive.safe_command()
                 pre = drive.robot.column_prefix
                 if u.shape != (drive.robot.n,) or not np.all(np.isfinite(u)):
                     rec.event(t, k, "nan_command", f"{name}: controller command {u.tolist()} "
@@ -462,6 +481,12 @@ class _Runner:
                 for drive in ep.drives.values():
                     drive.substep(i, h)
                 world.step_physics()
+        progress.close()
+        if status == "completed" and n_commanded == 0:
+            status, reason = "failed", (f"the controller never produced a command: all {k + 1} "
+                                        "steps fell back (e.g. every QP failed, no features)")
+            rec.event(k * dt, k, "never_commanded", reason)
+        rec.summary["commanded_steps"] = n_commanded
         rec.summary.update({"n_steps": k + 1, "sim_time_s": k * dt,
                             "mean_control_s": self.t_ctrl / (k + 1), "stop_reason": reason})
         rec.summary["audit"] = {name: a.summary() for name, a in self.audit.items()}
@@ -471,6 +496,35 @@ class _Runner:
             imageio.mimsave(self.out_dir / "video.gif", list(self.frames),  # type: ignore[arg-type]
                             duration=ep.video_every * dt)
         return status, reason
+
+
+class _Progress:
+    """A progress bar on a terminal (simulated time, real-time factor); silent otherwise."""
+
+    def __init__(self, total: int, dt: float) -> None:
+        import sys
+
+        self.bar: Any = None
+        self.dt = dt
+        self.t0 = time.perf_counter()
+        if sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, unit="step", leave=False, file=sys.stderr,
+                            mininterval=0.5)
+
+    def update(self, k: int) -> None:
+        if self.bar is None or k % 10:
+            return
+        wall = time.perf_counter() - self.t0
+        self.bar.set_postfix_str(f"t = {k * self.dt:.2f} s, x{k * self.dt / max(wall, 1e-9):.2f}"
+                                 " real time", refresh=False)
+        self.bar.n = k
+        self.bar.refresh()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def run_episode(ep: Episode, out_dir: Path, *, experiment: str, paper: str, config: Any,
