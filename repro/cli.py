@@ -3,7 +3,7 @@
 Subcommands::
 
     repro list [-v]                       experiments (and with -v their config fields)
-    repro run EXP [--set k=v ...] [--video] [--out DIR]
+    repro run EXP [--set KEY=VALUE]... [--video] [--out DIR [--force]]
     repro results [--force] [--paper P] [--include-slow]
     repro figures [--paper P]             figures, then results/claims.csv
     repro report [--output REPORT.md]
@@ -11,20 +11,28 @@ Subcommands::
 Global options ``--results DIR`` (default ``./results``) and ``--figures DIR``
 (default ``./figures``) may be given before or after the subcommand.
 A :class:`~repro.errors.ReproError` prints one line on stderr and exits 2.
+Every config is validated (ranges, choices, the experiment's own check) before any
+folder is created. SIGINT and SIGTERM during a run close it with status
+``interrupted``, print one line and exit 130 / 143 (128 + the signal number).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import json
+import signal
 import sys
-from collections.abc import Mapping, Sequence
+import time
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 from tqdm import tqdm
 
-from repro.config import apply_overrides, config_keys, describe, validate
+from repro.config import apply_overrides, config_keys, describe
 from repro.errors import ConfigError, ReproError, UnknownChoiceError
 from repro.runs import registry
 from repro.runs.registry import Experiment, Paper
@@ -36,6 +44,8 @@ DEFAULT_FIGURES = Path("figures")
 DEFAULT_REPORT = Path("REPORT.md")
 EXIT_USAGE = 2
 SHORT_HASH_LEN = 8
+#: The signals a run is closed on (status "interrupted"); exit code 128 + the signal number.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 # --------------------------------------------------------------------------- parser
@@ -80,10 +90,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--set",
         dest="overrides",
         metavar="KEY=VALUE",
-        action="extend",
-        nargs="+",
+        action="append",
         default=[],
-        help="override a config field (nested keys with dots: camera.fu=600)",
+        help="override one config field; repeat for several "
+        "(--set duration=5 --set camera_mode=exact); keys: repro list -v",
     )
     p.add_argument("--video", action="store_true", help="record a video (sets video=True)")
     p.add_argument(
@@ -94,9 +104,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="output directory (default: <results>/<paper>/<name>, "
         "or <name>__<hash> when the config differs from the defaults)",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="let --out overwrite a registered default run or a run of another config",
+    )
     p.set_defaults(func=_cmd_run)
 
-    p = sub.add_parser("results", help="run every experiment whose trace is missing or stale")
+    p = sub.add_parser(
+        "results",
+        help="run every experiment whose trace is missing or stale; mark runs whose "
+        "process is gone as interrupted",
+    )
     _add_global_options(p, top_level=False)
     p.add_argument("--force", action="store_true", help="rerun even fresh experiments")
     p.add_argument("--paper", metavar="P", default=None, help="only this paper")
@@ -130,6 +149,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         message = " ".join(str(exc).split("\n"))
         print(f"repro: error: {message}", file=sys.stderr)
         return EXIT_USAGE
+    except KeyboardInterrupt:  # outside a run (loading, listing...): nothing to close
+        print("repro: interrupted", file=sys.stderr)
+        return 128 + signal.SIGINT
 
 
 # --------------------------------------------------------------------------- helpers
@@ -149,7 +171,8 @@ def _first_line(text: str) -> str:
 
 
 def prepare_config(exp: Experiment, overrides: Sequence[str], video: bool = False) -> Any:
-    """``exp``'s default config with ``overrides`` (and ``video=True``) applied and validated."""
+    """``exp``'s default config with ``overrides`` (and ``video=True``) applied, validated
+    and checked by the experiment (:func:`repro.runs.registry.check_config`)."""
     config = exp.config_cls()
     if video:
         names = {f.name for f in dataclasses.fields(config)}
@@ -160,7 +183,9 @@ def prepare_config(exp: Experiment, overrides: Sequence[str], video: bool = Fals
                 f"valid keys: {', '.join(config_keys(config))}"
             )
         overrides = [*overrides, "video=true"]
-    return apply_overrides(config, overrides)
+    config = apply_overrides(config, overrides)
+    registry.check_config(exp, config)
+    return config
 
 
 def default_out_dir(exp: Experiment, results_dir: Path, config: Any) -> Path:
@@ -175,6 +200,90 @@ def default_out_dir(exp: Experiment, results_dir: Path, config: Any) -> Path:
     if digest == registry.compute_config_hash(exp.config_cls()):
         return base
     return base.with_name(f"{exp.name}__{digest[:SHORT_HASH_LEN]}")
+
+
+@contextlib.contextmanager
+def _stop_on_signals(fired: list[int]) -> Iterator[None]:
+    """While active, SIGINT and SIGTERM raise ``KeyboardInterrupt(<signal name>)`` once and
+    append the signal number to ``fired``; a second signal during the unwinding is ignored, so
+    the trace and manifest are closed whole (status "interrupted", see TraceRecorder)."""
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        if fired:
+            return
+        fired.append(signum)
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def _interrupted(fired: list[int], out_dir: Path, since: float) -> int:
+    """Print the one-line report of a run interrupted after ``since`` (time.time()); return
+    the exit code 128 + signum. A trace.csv older than ``since`` is an earlier run's: 0 rows."""
+    from repro.runs.trace import count_trace_rows
+
+    signum = fired[0] if fired else int(signal.SIGINT)
+    trace = out_dir / "trace.csv"
+    fresh = trace.is_file() and trace.stat().st_mtime >= since - 1.0  # coarse fs clocks
+    print(
+        f"repro: interrupted ({signal.Signals(signum).name}) after "
+        f"{count_trace_rows(out_dir) if fresh else 0} rows; partial trace in {out_dir}",
+        file=sys.stderr,
+    )
+    return 128 + signum
+
+
+def _registered_run(papers: Mapping[str, Paper], results_dir: Path, path: Path) -> str | None:
+    """The id of the experiment whose default folder ``path`` is, if any."""
+    target = path.resolve()
+    for other in registry.all_experiments(papers):
+        if registry.experiment_dir(results_dir, other).resolve() == target:
+            return other.id
+    return None
+
+
+def check_out_dir(
+    exp: Experiment, config: Any, out_dir: Path, papers: Mapping[str, Paper], results_dir: Path
+) -> None:
+    """Refuse an ``--out`` folder holding another run: a registered default folder (unless
+    this is that experiment with its default config) or a manifest of another experiment or
+    config. Raises :class:`ConfigError` (``--force`` skips this check)."""
+    digest = registry.compute_config_hash(config)
+    owner = _registered_run(papers, results_dir, out_dir)
+    is_default = digest == registry.compute_config_hash(exp.config_cls())
+    if owner is not None and not (owner == exp.id and is_default):
+        raise ConfigError(
+            f"--out {out_dir} is the default folder of {owner}; a run of {exp.id} with this "
+            "config would overwrite its committed trace: choose another folder (or drop "
+            "--out: overrides go to <name>__<hash>), or add --force"
+        )
+    manifest_path = out_dir / registry.MANIFEST_NAME
+    if not manifest_path.is_file():
+        return
+    try:
+        manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        manifest = {}
+    if not isinstance(manifest, dict):
+        manifest = {}
+    same_run = (
+        manifest.get("paper") == exp.paper
+        and manifest.get("experiment") == exp.name
+        and manifest.get("config_hash") == digest
+    )
+    if not same_run:
+        held = f"{manifest.get('paper', '?')}.{manifest.get('experiment', '?')}"
+        held_hash = str(manifest.get("config_hash") or "?")[:SHORT_HASH_LEN]
+        raise ConfigError(
+            f"--out {out_dir} holds a run of {held} (config {held_hash}), not of {exp.id} with "
+            f"config {digest[:SHORT_HASH_LEN]}; refusing to overwrite it: choose another "
+            "folder, or add --force"
+        )
 
 
 # --------------------------------------------------------------------------- commands
@@ -208,27 +317,70 @@ def _cmd_list(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     papers = registry.load_papers()
     exp = registry.find_experiment(papers, args.experiment)
-    # Validate everything before running anything.
+    # Validate everything before creating anything.
     config = prepare_config(exp, args.overrides, video=args.video)
-    out_dir = args.out if args.out is not None else default_out_dir(exp, args.results, config)
+    if args.out is not None:
+        out_dir = args.out
+        if not args.force:
+            check_out_dir(exp, config, out_dir, papers, args.results)
+    else:
+        out_dir = default_out_dir(exp, args.results, config)
     out_dir.mkdir(parents=True, exist_ok=True)
     print(f"running {exp.id} -> {out_dir}", file=sys.stderr)
-    result = exp.run(config, out_dir)
-    print(result if result is not None else out_dir)
+    fired: list[int] = []
+    started = time.time()
+    try:
+        with _stop_on_signals(fired):
+            result = registry.run_experiment(exp, config, out_dir)
+    except KeyboardInterrupt:
+        return _interrupted(fired, out_dir, started)
+    print(result)
     return 0
+
+
+def _fix_dead_runs(papers: Mapping[str, Paper], results_dir: Path) -> list[tuple[Path, dict]]:
+    """Mark every ``running`` run under ``<results>/<paper>/*/`` whose process is gone as
+    interrupted (default and override folders alike); return ``(folder, new manifest)``."""
+    from repro.runs.trace import mark_if_gone
+
+    fixed = []
+    for paper in papers:
+        manifests = (Path(results_dir) / paper).glob(f"*/{registry.MANIFEST_NAME}")
+        for manifest_path in sorted(manifests):
+            manifest = mark_if_gone(manifest_path.parent)
+            if manifest is not None:
+                fixed.append((manifest_path.parent, manifest))
+    return fixed
+
+
+def _running_elsewhere(run_dir: Path) -> str | None:
+    """``"pid N on HOST"`` if ``run_dir``'s manifest says a live process is writing it."""
+    try:
+        manifest = json.loads((run_dir / registry.MANIFEST_NAME).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(manifest, dict) or manifest.get("status") != "running":
+        return None
+    return f"pid {manifest.get('pid', '?')} on {manifest.get('hostname', '?')}"
 
 
 def _cmd_results(args: argparse.Namespace) -> int:
     papers = _select_papers(registry.load_papers(), args.paper)
+    fixed = _fix_dead_runs(papers, args.results)
     todo: list[tuple[Experiment, Any, str]] = []
     fresh: list[tuple[Experiment, str]] = []
+    busy: list[tuple[Experiment, str]] = []
     skipped: list[Experiment] = []
     for exp in registry.all_experiments(papers):
         if exp.slow and not args.include_slow:
             skipped.append(exp)
             continue
         config = exp.config_cls()
-        validate(config)
+        registry.check_config(exp, config)
+        running = _running_elsewhere(registry.experiment_dir(args.results, exp))
+        if running is not None:  # never write into a folder a live run is writing
+            busy.append((exp, running))
+            continue
         if args.force:
             todo.append((exp, config, "forced"))
             continue
@@ -238,6 +390,8 @@ def _cmd_results(args: argparse.Namespace) -> int:
         else:
             fresh.append((exp, reason))
 
+    for run_dir, manifest in fixed:
+        print(f"interrupted  {run_dir}  ({manifest['reason']})")
     ran: list[tuple[Experiment, str, Path]] = []
     with tqdm(
         total=len(todo),
@@ -250,17 +404,30 @@ def _cmd_results(args: argparse.Namespace) -> int:
             bar.set_postfix_str(exp.id)
             out_dir = registry.experiment_dir(args.results, exp)
             out_dir.mkdir(parents=True, exist_ok=True)
-            result = exp.run(config, out_dir)
-            ran.append((exp, reason, Path(result) if result is not None else out_dir))
+            fired: list[int] = []
+            started = time.time()
+            try:
+                with _stop_on_signals(fired):
+                    path = registry.run_experiment(exp, config, out_dir)
+            except KeyboardInterrupt:
+                return _interrupted(fired, out_dir, started)
+            ran.append((exp, reason, path))
             bar.update(1)
 
     for exp, reason, path in ran:
         print(f"ran    {exp.id}  ({reason}) -> {path}")
     for exp, reason in fresh:
         print(f"fresh  {exp.id}  ({reason})")
+    for exp, running in busy:
+        print(f"busy   {exp.id}  (running as {running}; not rerun)")
     for exp in skipped:
         print(f"skip   {exp.id}  (slow; use --include-slow)")
-    print(f"{len(ran)} ran, {len(fresh)} fresh, {len(skipped)} skipped")
+    counts = f"{len(ran)} ran, {len(fresh)} fresh, {len(skipped)} skipped"
+    if busy:
+        counts += f", {len(busy)} busy"
+    if fixed:
+        counts += f", {len(fixed)} marked interrupted"
+    print(counts)
     return 0
 
 

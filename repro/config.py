@@ -6,18 +6,24 @@ field's ``metadata``::
 
     @dataclass(frozen=True)
     class Case1Config:
-        gain: float = param(0.4, unit="1/s", range=(0.0, None), help="IBVS gain lambda_4p")
+        gain: float = param(0.4, unit="1/s", range=(0.0, 100.0), low_open=True,
+                            help="IBVS gain lambda_4p")
         solver: str = param("proxsuite", choices=("proxsuite", "osqp"), help="QP solver")
-        q0: tuple[float, ...] = param((0.0, -60.0, 0.0), unit="deg", help="initial joints")
+        q0: tuple[float, ...] = param((0.0, -60.0, 0.0), unit="deg", range=(-360.0, 360.0),
+                                      help="initial joints")
         camera: CameraConfig = param(CameraConfig())
 
 :func:`validate` checks every field (recursively) against that metadata;
 :func:`apply_overrides` applies ``key=value`` strings from the command line
-(``camera.fu=600``, ``q0=0,-60,0``), parsing each value by the field's type
-annotation; :func:`describe` lists the fields for ``repro list -v``.
+(``duration=5``, ``q0=0,-60,0``, nested: ``camera.fu=600``), parsing each value by
+the field's type annotation; :func:`describe` lists the fields for ``repro list -v``.
 
-Ranges are inclusive; ``None`` leaves that side unbounded. For tuple and list
-fields the range and choices apply to every element.
+Every numeric field (``int``, ``float``, tuples of them, ``float | None``...) must
+declare a ``range`` finite on both sides: :func:`param` refuses a numeric default
+without one when the class is defined, and :func:`validate` refuses a config with
+an undeclared numeric field. Ranges are inclusive; ``low_open=True`` excludes the
+low end (a gain in ``(0, 100]``). NaN and infinities are never valid values. For
+tuple and list fields the range and choices apply to every element.
 """
 
 from __future__ import annotations
@@ -35,11 +41,18 @@ from typing import Any, TypeVar
 
 from repro.errors import ConfigError, UnknownChoiceError
 
-__all__ = ["param", "validate", "apply_overrides", "describe", "config_keys"]
+__all__ = [
+    "param",
+    "validate",
+    "check_declared",
+    "apply_overrides",
+    "describe",
+    "config_keys",
+]
 
 T = TypeVar("T")
 
-Range = tuple[float | None, float | None]
+Range = tuple[float, float]
 
 _TRUE = ("true", "1", "yes", "on")
 _FALSE = ("false", "0", "no", "off")
@@ -54,23 +67,34 @@ def param(
     *,
     unit: str = "",
     range: Range | None = None,
+    low_open: bool = False,
     choices: tuple[str, ...] | None = None,
     help: str = "",
     output_only: bool = False,
 ) -> Any:
     """A ``dataclasses.field`` with ``default`` and metadata unit/range/choices/help.
 
-    ``range`` is an inclusive ``(low, high)`` pair, ``None`` meaning unbounded on
-    that side. Tuples, lists and other unhashable defaults are stored as a
-    ``default_factory`` (a deep copy), so each instance gets its own value.
-    Raises :class:`ConfigError` at class-definition time if the metadata is
-    malformed or the default itself violates it.
+    ``range`` is an inclusive ``(low, high)`` pair of finite numbers, required for
+    every numeric field (``low_open=True``: ``low < value <= high``). Tuples, lists
+    and other unhashable defaults are stored as a ``default_factory`` (a deep copy),
+    so each instance gets its own value. Raises :class:`ConfigError` at
+    class-definition time if the metadata is malformed, a numeric default has no
+    range, or the default itself violates the metadata.
     """
     metadata: dict[str, Any] = {}
     if unit:
         metadata["unit"] = unit
     if range is not None:
-        metadata["range"] = _check_range_spec(range)
+        metadata["range"] = _check_range_spec(range, low_open)
+        if low_open:
+            metadata["low_open"] = True
+    elif low_open:
+        raise ConfigError("param(low_open=True) needs a range=(low, high)")
+    elif _has_number(default):
+        raise ConfigError(
+            f"param({default!r}{f', help={help!r}' if help else ''}) is numeric and needs "
+            "range=(low, high), finite on both sides (the physically meaningful values)"
+        )
     if choices is not None:
         choices = tuple(choices)
         if not choices:
@@ -89,16 +113,68 @@ def param(
     return dataclasses.field(default=default, metadata=metadata)
 
 
-def _check_range_spec(spec: Any) -> Range:
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _has_number(value: Any) -> bool:
+    if isinstance(value, (tuple, list)):
+        return any(_is_number(item) for item in value)
+    return _is_number(value)
+
+
+def _check_range_spec(spec: Any, low_open: bool = False) -> Range:
     try:
         low, high = spec
     except (TypeError, ValueError):
+        raise ConfigError(f"param(range={spec!r}) must be a (low, high) pair") from None
+    if not (_is_number(low) and _is_number(high) and math.isfinite(low) and math.isfinite(high)):
         raise ConfigError(
-            f"param(range={spec!r}) must be a (low, high) pair, None meaning unbounded"
-        ) from None
-    if low is not None and high is not None and low > high:
+            f"param(range={spec!r}) must be finite on both sides: every numeric field "
+            "needs physically meaningful bounds"
+        )
+    if low > high:
         raise ConfigError(f"param(range={spec!r}) has low > high")
+    if low_open and low == high:
+        raise ConfigError(f"param(range={spec!r}, low_open=True) is empty")
     return (low, high)
+
+
+def _is_numeric_type(tp: Any) -> bool:
+    """Whether an annotation holds numbers: int, float, X | None, tuple/list of those."""
+    if tp is bool:
+        return False
+    if tp in (int, float):
+        return True
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType, tuple, list):
+        return any(_is_numeric_type(arg) for arg in typing.get_args(tp) if arg is not Ellipsis)
+    return False
+
+
+def check_declared(config_cls: Any) -> None:
+    """Refuse a config class (or instance) with a numeric field that declares no range.
+
+    Nested dataclass fields are checked too. Raises :class:`ConfigError` naming the field.
+    """
+    cls = config_cls if isinstance(config_cls, type) else type(config_cls)
+    if not dataclasses.is_dataclass(cls):
+        raise ConfigError(f"{cls.__name__} is not a dataclass config")
+    hints = _field_types(cls)
+    for f in dataclasses.fields(cls):
+        tp = hints.get(f.name)
+        if tp is None:  # unresolvable annotation: judge by the default value
+            default = f.default_factory() if callable(f.default_factory) else f.default
+            numeric = _has_number(default)
+        else:
+            numeric = _is_numeric_type(tp)
+            if dataclasses.is_dataclass(tp):
+                check_declared(tp)
+        if numeric and f.metadata.get("range") is None:
+            raise ConfigError(
+                f"config field {cls.__name__}.{f.name} is numeric but declares no range: "
+                "declare it with param(..., range=(low, high)), finite on both sides"
+            )
 
 
 # --------------------------------------------------------------------------- validation
@@ -107,10 +183,13 @@ def _check_range_spec(spec: Any) -> Range:
 def validate(config: Any) -> None:
     """Check every field of ``config`` (recursively) against its range/choices metadata.
 
-    Raises :class:`ConfigError` naming the field, the value and the allowed range,
-    or :class:`UnknownChoiceError` listing the valid choices.
+    Raises :class:`ConfigError` naming the field, the value and the allowed range
+    (``NaN is not allowed for mu``, ``mu=20.0 is out of range; allowed: [0.0, 10.0]``),
+    or :class:`UnknownChoiceError` listing the valid choices. A numeric field without a
+    declared range is refused too (see :func:`check_declared`).
     """
     _require_instance(config)
+    check_declared(config)
     _validate(config, prefix="")
 
 
@@ -136,29 +215,40 @@ def _check_value(name: str, value: Any, metadata: Any) -> None:
 
 
 def _check_scalar(name: str, value: Any, metadata: Any) -> None:
+    if isinstance(value, float) and not math.isfinite(value):
+        allowed = f"; allowed: {_metadata_range(metadata)}" if "range" in metadata else ""
+        raise ConfigError(f"{_nonfinite_name(value)} is not allowed for {name}{allowed}")
     choices = metadata.get("choices")
     if choices is not None and value not in choices:
         raise UnknownChoiceError(f"{name} value", value, [str(c) for c in choices])
     bounds = metadata.get("range")
     if bounds is None:
         return
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if not _is_number(value):
         raise ConfigError(
-            f"{name}={value!r} must be a number in {format_range(bounds)}, "
+            f"{name}={value!r} must be a number in {_metadata_range(metadata)}, "
             f"not {type(value).__name__}"
         )
     low, high = bounds
-    # Written as "not (inside)" so that NaN is rejected.
-    if not ((low is None or value >= low) and (high is None or value <= high)):
-        raise ConfigError(f"{name}={value!r} is out of range; allowed: {format_range(bounds)}")
+    above_low = value > low if metadata.get("low_open") else value >= low
+    if not (above_low and value <= high):
+        raise ConfigError(
+            f"{name}={value!r} is out of range; allowed: {_metadata_range(metadata)}"
+        )
 
 
-def format_range(bounds: Range) -> str:
-    """``(0.0, None)`` -> ``"[0.0, +inf)"``: inclusive bounds, open at infinity."""
+def _nonfinite_name(value: float) -> str:
+    return "NaN" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+
+
+def _metadata_range(metadata: Any) -> str:
+    return format_range(metadata["range"], bool(metadata.get("low_open")))
+
+
+def format_range(bounds: Range, low_open: bool = False) -> str:
+    """``(0.0, 10.0)`` -> ``"[0.0, 10.0]"``; with ``low_open`` -> ``"(0.0, 10.0]"``."""
     low, high = bounds
-    left = "(-inf" if low is None else f"[{low}"
-    right = "+inf)" if high is None else f"{high}]"
-    return f"{left}, {right}"
+    return f"{'(' if low_open else '['}{low}, {high}]"
 
 
 # --------------------------------------------------------------------------- overrides
@@ -168,6 +258,8 @@ def apply_overrides(config: T, overrides: Sequence[str]) -> T:
     """Apply ``key=value`` strings to a frozen config and return the validated copy.
 
     Keys may reach into nested dataclass fields with dots (``camera.fu=600``).
+    ``nan``, ``inf`` and ``-inf`` are refused with that word (``NaN is not allowed
+    for mu``), never silently accepted.
     Values are parsed by the field's annotation: ``float``, ``int``, ``bool``
     (true/false/1/0/yes/no/on/off), ``str``, ``Path``, ``Literal``, ``Enum``,
     ``X | None`` (``none``/``null``), and tuples/lists of those as
@@ -218,12 +310,24 @@ def _set_path(root: Any, obj: Any, parts: list[str], key: str, text: str) -> Any
 
 
 def _parse(text: str, tp: Any, key: str) -> Any:
-    """Parse ``text`` as a value of type ``tp``; ConfigError names ``key`` and the type."""
+    """Parse ``text`` as a value of type ``tp``; ConfigError names ``key`` and the type.
+
+    Non-finite floats parse (``validate`` then rejects them by name); a non-finite
+    number given for an ``int`` field is reported as such, not as unparsable.
+    """
     try:
         return _parse_as(text, tp, key)
     except (ValueError, TypeError) as exc:
         if isinstance(exc, ConfigError):
             raise
+        for i, item in enumerate(_split_sequence(text)):
+            try:
+                number = float(item)
+            except ValueError:
+                continue
+            if not math.isfinite(number):
+                where = key if item == text.strip() else f"{key}[{i}]"
+                raise ConfigError(f"{_nonfinite_name(number)} is not allowed for {where}") from None
         raise ConfigError(f"cannot parse {key}={text!r}: expected {type_name(tp)}") from None
 
 
@@ -283,10 +387,7 @@ def _parse_as(text: str, tp: Any, key: str) -> Any:
     if tp is int:
         return int(text)
     if tp is float:
-        value = float(text)
-        if math.isnan(value):
-            raise ValueError(text)
-        return value
+        return float(text)  # validate() rejects nan/inf, naming the field
     if tp is str:
         return text
     if tp is Path:
@@ -411,7 +512,7 @@ def _describe_meta(metadata: Any) -> str:
     )
     parts = [head] if head else []
     if metadata.get("range") is not None:
-        parts.append(f"range {format_range(metadata['range'])}")
+        parts.append(f"range {_metadata_range(metadata)}")
     if metadata.get("choices") is not None:
         parts.append("choices: " + ", ".join(str(c) for c in metadata["choices"]))
     return "; ".join(parts)

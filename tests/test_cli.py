@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import types
@@ -15,27 +16,29 @@ import pytest
 
 from repro import cli
 from repro.config import param
-from repro.errors import ReproError, SolverError, UnknownChoiceError
+from repro.errors import ConfigError, ReproError, SolverError, UnknownChoiceError
 from repro.runs import registry
 from repro.runs.registry import Experiment, Paper, find_experiment, is_stale
 
 
 @dataclass(frozen=True)
 class FakeCfg:
-    gain: float = param(0.4, unit="1/s", range=(0.0, None), help="IBVS gain")
+    gain: float = param(0.4, unit="1/s", range=(0.0, 100.0), help="IBVS gain")
     solver: str = param("proxsuite", choices=("proxsuite", "osqp"))
     video: bool = param(False)
 
 
 @dataclass(frozen=True)
 class NoVideoCfg:
-    steps: int = param(10, range=(1, None))
+    steps: int = param(10, range=(1, 1000))
 
 
 class Runner:
     """A fake ``Experiment.run`` recording its calls and writing a completed manifest."""
 
-    def __init__(self, status: str = "completed", error: Exception | None = None) -> None:
+    def __init__(self, paper: str, status: str = "completed",
+                 error: Exception | None = None) -> None:
+        self.paper = paper
         self.calls: list[tuple[Any, Path]] = []
         self.status = status
         self.error = error
@@ -44,14 +47,21 @@ class Runner:
         self.calls.append((config, out_dir))
         if self.error is not None:
             raise self.error
-        manifest = {"status": self.status, "config_hash": registry.compute_config_hash(config)}
+        # As the real run functions do: the experiment named after the folder.
+        manifest = {
+            "experiment": out_dir.name.split("__")[0],
+            "paper": self.paper,
+            "status": self.status,
+            "config_hash": registry.compute_config_hash(config),
+        }
         (out_dir / "manifest.json").write_text(json.dumps(manifest))
         return out_dir
 
 
 @pytest.fixture
 def runners() -> dict[str, Runner]:
-    return {k: Runner() for k in ("fake.case1", "fake.case2", "other.case1", "other.case3")}
+    keys = ("fake.case1", "fake.case2", "other.case1", "other.case3")
+    return {k: Runner(paper=k.split(".")[0]) for k in keys}
 
 
 def _papers(runners: dict[str, Runner]) -> dict[str, Paper]:
@@ -208,7 +218,7 @@ def test_run_bad_override_exits_2_before_running(papers, runners, capsys, tmp_pa
     assert code == 2
     assert runners["fake.case1"].calls == []
     err = capsys.readouterr().err
-    assert "gain=-1.0" in err and "[0.0, +inf)" in err
+    assert "gain=-1.0" in err and "[0.0, 100.0]" in err
     assert not (tmp_path / "fake").exists()
 
 
@@ -244,7 +254,8 @@ def test_run_with_overrides_uses_hashed_dir(papers, runners, tmp_path, capsys):
 
 
 def test_run_several_overrides(papers, runners, tmp_path):
-    argv = ["run", "fake.case1", "--set", "gain=0.9", "solver=osqp", "--results", str(tmp_path)]
+    argv = ["run", "fake.case1", "--set", "gain=0.9", "--set", "solver=osqp",
+            "--results", str(tmp_path)]
     assert cli.main(argv) == 0
     [(config, out_dir)] = runners["fake.case1"].calls
     assert config == FakeCfg(gain=0.9, solver="osqp")
@@ -310,7 +321,7 @@ def test_list_verbose(papers, capsys):
     assert cli.main(["list", "-v"]) == 0
     out = capsys.readouterr().out
     assert "gain: float = 0.4" in out
-    assert "IBVS gain [1/s]; range [0.0, +inf)" in out
+    assert "IBVS gain [1/s]; range [0.0, 100.0]" in out
     assert "choices: proxsuite, osqp" in out
     assert "steps: int = 10" in out
 
@@ -435,3 +446,166 @@ def test_python_dash_m_repro_help():
     )
     assert proc.returncode == 0
     assert "results" in proc.stdout and "figures" in proc.stdout
+
+
+# --------------------------------------------------------------------------- issue 7: inputs
+
+
+def test_set_takes_one_pair_and_options_may_precede_the_id(papers, runners, tmp_path):
+    argv = ["--results", str(tmp_path), "run", "--set", "gain=0.9", "fake.case1",
+            "--set", "solver=osqp"]
+    assert cli.main(argv) == 0
+    [(config, _)] = runners["fake.case1"].calls
+    assert config == FakeCfg(gain=0.9, solver="osqp")
+
+
+def test_set_with_two_pairs_is_a_usage_error(papers, runners, capsys):
+    assert cli.main(["run", "fake.case1", "--set", "gain=0.9", "solver=osqp"]) == 2
+    assert "unrecognized arguments: solver=osqp" in capsys.readouterr().err
+    assert runners["fake.case1"].calls == []
+
+
+def _checked(papers: dict[str, Paper], message: str) -> list[Any]:
+    """Give fake.case1 a ``check`` that refuses every config; return the configs it saw."""
+    seen: list[Any] = []
+
+    def check(config: Any) -> None:
+        seen.append(config)
+        raise ConfigError(message)
+
+    exp = replace(papers["fake"].experiments[0], check=check)
+    papers["fake"] = replace(papers["fake"], experiments=(exp, papers["fake"].experiments[1]))
+    return seen
+
+
+def test_run_calls_the_experiment_check_before_creating_any_folder(papers, runners, tmp_path,
+                                                                    capsys):
+    seen = _checked(papers, "q0_deg needs 7 joint angles [deg], got 2")
+    out = tmp_path / "out"
+    for argv in (["--results", str(tmp_path), "run", "fake.case1", "--set", "gain=2"],
+                 ["run", "fake.case1", "--out", str(out)]):
+        assert cli.main(argv) == 2
+        assert "q0_deg needs 7 joint angles" in capsys.readouterr().err
+    assert [c.gain for c in seen] == [2.0, 0.4]
+    assert runners["fake.case1"].calls == []
+    assert list(tmp_path.iterdir()) == []  # neither <results>/fake nor --out was created
+
+
+def test_results_checks_every_config_before_running_any(papers, runners, tmp_path, capsys):
+    _checked(papers, "bad default")
+    assert cli.main(["--results", str(tmp_path), "results"]) == 2
+    assert "bad default" in capsys.readouterr().err
+    assert all(not r.calls for r in runners.values())
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_registry_refuses_a_config_with_an_unbounded_numeric_field(monkeypatch, runners):
+    @dataclass(frozen=True)
+    class Unbounded:
+        limit: float | None = param(None)
+
+    module = types.ModuleType("fake_repro_papers")
+    exp = replace(_papers(runners)["fake"].experiments[0], config_cls=Unbounded)
+    module.FAKE = Paper("fake", (exp,))
+    monkeypatch.setitem(sys.modules, "fake_repro_papers", module)
+    _entry_points(monkeypatch, fake="fake_repro_papers:FAKE")
+    with pytest.raises(ReproError, match=r"'case1'.*Unbounded.limit is numeric.*no range"):
+        registry.load_papers()
+
+
+def test_out_manifest_names_the_registered_experiment(papers, runners, tmp_path):
+    out = tmp_path / "my_folder__v2"
+    assert cli.main(["run", "fake.case1", "--out", str(out)]) == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["experiment"] == "case1"  # not "my_folder"
+
+
+def test_run_passes_the_experiment_name_to_a_run_that_accepts_it(papers, tmp_path):
+    seen: dict[str, Any] = {}
+
+    def run(config: Any, out_dir: Path, *, experiment: str | None = None) -> Path:
+        seen["experiment"] = experiment
+        return out_dir
+
+    exp = replace(papers["other"].experiments[1], run=run)
+    papers["other"] = replace(papers["other"], experiments=(papers["other"].experiments[0], exp))
+    assert cli.main(["run", "other.case3", "--out", str(tmp_path / "x")]) == 0
+    assert seen == {"experiment": "case3"}
+
+
+def test_out_refuses_a_default_run_folder_unless_forced(papers, runners, tmp_path, capsys):
+    results = tmp_path / "results"
+    assert cli.main(["--results", str(results), "run", "fake.case1"]) == 0
+    default = results / "fake" / "case1"
+    committed = (default / "manifest.json").read_text()
+
+    # another config into the default folder of the same experiment
+    argv = ["--results", str(results), "run", "fake.case1", "--set", "gain=2", "--out",
+            str(default)]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "is the default folder of fake.case1" in err and "--force" in err
+    # another experiment into it
+    assert cli.main(["--results", str(results), "run", "other.case1", "--out", str(default)]) == 2
+    assert "is the default folder of fake.case1" in capsys.readouterr().err
+    assert (default / "manifest.json").read_text() == committed
+    assert len(runners["fake.case1"].calls) == 1 and runners["other.case1"].calls == []
+
+    # a folder holding a run of another config (not a registered folder)
+    elsewhere = tmp_path / "mine"
+    assert cli.main(["run", "fake.case1", "--out", str(elsewhere)]) == 0
+    assert cli.main(["run", "fake.case1", "--set", "gain=3", "--out", str(elsewhere)]) == 2
+    assert "holds a run of fake.case1 (config" in capsys.readouterr().err
+    # the same config again, or the default config into its own default folder: fine
+    assert cli.main(["run", "fake.case1", "--out", str(elsewhere)]) == 0
+    assert cli.main(["--results", str(results), "run", "fake.case1", "--out", str(default)]) == 0
+
+    assert cli.main([*argv, "--force"]) == 0
+    assert runners["fake.case1"].calls[-1] == (FakeCfg(gain=2.0), default)
+
+
+# --------------------------------------------------------------------------- issue 7: dead runs
+
+
+def _dead_pid() -> int:
+    proc = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    return int(proc.stdout)
+
+
+def _running_manifest(run_dir: Path, pid: int, n_lines: int, **fields: Any) -> None:
+    import socket
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    manifest = {"experiment": run_dir.name.split("__")[0], "paper": run_dir.parent.name,
+                "status": "running", "n_rows": 0, "pid": pid,
+                "hostname": socket.gethostname(), "config_hash": "x", **fields}
+    (run_dir / "manifest.json").write_text(json.dumps(manifest))
+    (run_dir / "trace.csv").write_text("t\n" + "".join(f"{k}\n" for k in range(n_lines)))
+
+
+def test_results_marks_dead_override_runs_interrupted_without_rerunning(papers, runners,
+                                                                       tmp_path, capsys):
+    override = tmp_path / "fake" / "case1__1234abcd"
+    _running_manifest(override, _dead_pid(), 7)
+    live = tmp_path / "other" / "case1__live"
+    _running_manifest(live, os.getpid(), 3)
+    assert cli.main(["--results", str(tmp_path), "results"]) == 0
+    out = capsys.readouterr().out
+    assert f"interrupted  {override}  (process gone: pid" in out and "7 rows" in out
+    assert "1 marked interrupted" in out
+    manifest = json.loads((override / "manifest.json").read_text())
+    assert (manifest["status"], manifest["n_rows"]) == ("interrupted", 7)
+    assert json.loads((live / "manifest.json").read_text())["status"] == "running"
+    ran = [out_dir for r in runners.values() for _, out_dir in r.calls]
+    assert override not in ran and all("__" not in d.name for d in ran)
+
+
+def test_results_reruns_a_dead_default_run_but_not_a_live_one(papers, runners, tmp_path, capsys):
+    _running_manifest(tmp_path / "fake" / "case1", _dead_pid(), 2)
+    _running_manifest(tmp_path / "other" / "case3", os.getpid(), 2)
+    assert cli.main(["--results", str(tmp_path), "results"]) == 0
+    out = capsys.readouterr().out
+    assert "ran    fake.case1  (last run status is 'interrupted'" in out
+    assert f"busy   other.case3  (running as pid {os.getpid()}" in out
+    assert runners["other.case3"].calls == []

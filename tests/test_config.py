@@ -14,21 +14,21 @@ from repro.errors import ConfigError, UnknownChoiceError
 
 @dataclass(frozen=True)
 class Camera:
-    fu: float = param(500.0, unit="px", range=(1.0, None), help="focal length")
+    fu: float = param(500.0, unit="px", range=(1.0, 5000.0), help="focal length")
     width: int = param(640, unit="px", range=(1, 4096))
 
 
 @dataclass(frozen=True)
 class Cfg:
-    gain: float = param(0.4, unit="1/s", range=(0.0, None), help="IBVS gain lambda_4p")
-    steps: int = param(100, range=(1, None))
+    gain: float = param(0.4, unit="1/s", range=(0.0, 100.0), help="IBVS gain lambda_4p")
+    steps: int = param(100, range=(1, 10000))
     video: bool = param(False)
     solver: str = param("proxsuite", choices=("proxsuite", "osqp"), help="QP solver")
     label: str = param("run")
     q0: tuple[float, ...] = param((0.0, -60.0, 0.0), unit="deg", range=(-180.0, 180.0))
-    xy: tuple[float, float] = param((1.0, 2.0), unit="m")
+    xy: tuple[float, float] = param((1.0, 2.0), unit="m", range=(-10.0, 10.0))
     names: tuple[str, ...] = param(("a",), choices=("a", "b", "c"))
-    limit: float | None = param(None)
+    limit: float | None = param(None, range=(0.0, 5.0))
     path: Path = param(Path("x"))
     camera: Camera = param(Camera())
 
@@ -41,7 +41,7 @@ def test_param_stores_metadata_and_tuple_default_factory():
     gain = fields["gain"]
     assert gain.default == 0.4
     assert gain.metadata["unit"] == "1/s"
-    assert gain.metadata["range"] == (0.0, None)
+    assert gain.metadata["range"] == (0.0, 100.0)
     assert gain.metadata["help"] == "IBVS gain lambda_4p"
     assert fields["solver"].metadata["choices"] == ("proxsuite", "osqp")
     assert fields["q0"].default is dataclasses.MISSING
@@ -51,16 +51,16 @@ def test_param_stores_metadata_and_tuple_default_factory():
 def test_param_list_default_is_not_shared():
     @dataclass(frozen=True)
     class WithList:
-        xs: list = param([1, 2])
+        xs: list = param(["a", "b"])
 
     a, b = WithList(), WithList()
-    assert a.xs == [1, 2]
+    assert a.xs == ["a", "b"]
     assert a.xs is not b.xs
 
 
 def test_param_rejects_default_outside_its_own_range_or_choices():
-    with pytest.raises(ConfigError, match=r"\[0.0, \+inf\)"):
-        param(-1.0, range=(0.0, None))
+    with pytest.raises(ConfigError, match=r"\[0.0, 1.0\]"):
+        param(-1.0, range=(0.0, 1.0))
     with pytest.raises(UnknownChoiceError, match="osqp, proxsuite"):
         param("gurobi", choices=("proxsuite", "osqp"))
     with pytest.raises(ConfigError, match="low > high"):
@@ -78,11 +78,11 @@ def test_validate_reports_field_value_and_range():
     with pytest.raises(ConfigError) as info:
         validate(Cfg(gain=-0.5))
     msg = str(info.value)
-    assert "gain" in msg and "-0.5" in msg and "[0.0, +inf)" in msg
+    assert "gain" in msg and "-0.5" in msg and "[0.0, 100.0]" in msg
 
 
 def test_validate_nested_and_tuple_elements():
-    with pytest.raises(ConfigError, match=r"camera\.fu.*\[1\.0, \+inf\)"):
+    with pytest.raises(ConfigError, match=r"camera\.fu.*\[1\.0, 5000\.0\]"):
         validate(Cfg(camera=Camera(fu=0.0)))
     with pytest.raises(ConfigError, match=r"q0\[1\]=-200\.0.*\[-180\.0, 180\.0\]"):
         validate(Cfg(q0=(0.0, -200.0)))
@@ -185,7 +185,6 @@ def test_override_whole_nested_config_is_refused():
     ("item", "expected_type"),
     [
         ("gain=fast", "float"),
-        ("gain=nan", "float"),
         ("steps=2.5", "int"),
         ("q0=0,x,0", r"tuple\[float, \.\.\.\]"),
         ("limit=abc", r"float \| None"),
@@ -211,7 +210,7 @@ def test_override_out_of_range_names_range():
     with pytest.raises(ConfigError) as info:
         apply_overrides(Cfg(), ["gain=-1"])
     msg = str(info.value)
-    assert "gain=-1.0" in msg and "[0.0, +inf)" in msg
+    assert "gain=-1.0" in msg and "[0.0, 100.0]" in msg
     with pytest.raises(ConfigError, match=r"camera\.width=0.*\[1, 4096\]"):
         apply_overrides(Cfg(), ["camera.width=0"])
     with pytest.raises(ConfigError, match=r"q0\[0\]=999\.0"):
@@ -232,8 +231,8 @@ def test_override_in_locally_defined_config_infers_types():
     @dataclass(frozen=True)
     class Local:
         k: float = param(1.0, range=(0.0, 10.0))
-        n: int = 3
-        ts: tuple[float, ...] = (1.0,)
+        n: int = param(3, range=(0, 10))
+        ts: tuple[float, ...] = param((1.0,), range=(0.0, 10.0))
 
     cfg = apply_overrides(Local(), ["k=2", "n=4", "ts=1,2"])
     assert (cfg.k, cfg.n, cfg.ts) == (2.0, 4, (1.0, 2.0))
@@ -246,7 +245,7 @@ def test_override_in_locally_defined_config_infers_types():
 
 def test_describe_rows():
     rows = {row[0]: row for row in describe(Cfg)}
-    assert rows["gain"] == ("gain", "float", "0.4", "IBVS gain lambda_4p [1/s]; range [0.0, +inf)")
+    assert rows["gain"] == ("gain", "float", "0.4", "IBVS gain lambda_4p [1/s]; range [0.0, 100.0]")
     assert rows["q0"][1] == "tuple[float, ...]"
     assert rows["q0"][2] == "(0.0, -60.0, 0.0)"
     assert rows["solver"][3] == "QP solver; choices: proxsuite, osqp"
@@ -255,7 +254,7 @@ def test_describe_rows():
         "camera.fu",
         "float",
         "500.0",
-        "focal length [px]; range [1.0, +inf)",
+        "focal length [px]; range [1.0, 5000.0]",
     )
     assert "camera" not in rows
     assert config_keys(Cfg) == [row[0] for row in describe(Cfg())]
@@ -264,3 +263,93 @@ def test_describe_rows():
 def test_describe_rejects_non_dataclass():
     with pytest.raises(ConfigError, match="not a dataclass"):
         describe(int)
+
+
+# --------------------------------------------------------------------------- finite ranges
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: param(0.4),  # a float without a range
+        lambda: param(3),  # an int
+        lambda: param((0.04, 0.08), unit="m"),  # a tuple of numbers
+        lambda: param(0.4, range=(0.0, None)),  # open-ended
+        lambda: param(0.4, range=(None, 1.0)),
+        lambda: param(0.4, range=(0.0, float("inf"))),
+        lambda: param(0.4, range=(float("nan"), 1.0)),
+    ],
+)
+def test_param_refuses_numeric_field_without_finite_range(make):
+    with pytest.raises(ConfigError, match="range"):
+        make()
+
+
+def test_param_refusal_happens_when_the_class_is_defined():
+    with pytest.raises(ConfigError, match=r"param\(0.01, help='mu'\) is numeric and needs range"):
+
+        @dataclass(frozen=True)
+        class NoRange:
+            mu: float = param(0.01, help="mu")
+
+
+def test_non_numeric_fields_need_no_range():
+    @dataclass(frozen=True)
+    class Plain:
+        on: bool = param(True)
+        name: str = param("a")
+        names: tuple[str, ...] = param(("a",), choices=("a", "b"))
+
+    validate(Plain())
+
+
+def test_validate_refuses_an_undeclared_numeric_field():
+    @dataclass(frozen=True)
+    class Hidden:
+        limit: float | None = param(None)  # numeric by its annotation only
+
+    with pytest.raises(ConfigError, match=r"Hidden.limit is numeric but declares no range"):
+        validate(Hidden())
+
+
+def test_low_open_range():
+    @dataclass(frozen=True)
+    class Gains:
+        k: float = param(1.0, unit="1/s", range=(0.0, 100.0), low_open=True)
+
+    with pytest.raises(ConfigError, match=r"k=0.0 is out of range; allowed: \(0.0, 100.0\]"):
+        apply_overrides(Gains(), ["k=0"])
+    assert apply_overrides(Gains(), ["k=100"]).k == 100.0
+    assert describe(Gains)[0][3] == "[1/s]; range (0.0, 100.0]"
+    with pytest.raises(ConfigError, match="empty"):
+        param(1.0, range=(1.0, 1.0), low_open=True)
+
+
+@pytest.mark.parametrize(
+    ("item", "message"),
+    [
+        ("gain=nan", "NaN is not allowed for gain; allowed: [0.0, 100.0]"),
+        ("gain=NaN", "NaN is not allowed for gain"),
+        ("gain=inf", "inf is not allowed for gain; allowed: [0.0, 100.0]"),
+        ("gain=-inf", "-inf is not allowed for gain"),
+        ("gain=Infinity", "inf is not allowed for gain"),
+        ("q0=0,inf,0", "inf is not allowed for q0[1]"),
+        ("xy=nan,1", "NaN is not allowed for xy[0]"),
+        ("limit=inf", "inf is not allowed for limit"),
+        ("camera.fu=inf", "inf is not allowed for camera.fu"),
+        ("steps=inf", "inf is not allowed for steps"),
+        ("steps=nan", "NaN is not allowed for steps"),
+    ],
+)
+def test_override_rejects_non_finite_values_by_name(item, message):
+    with pytest.raises(ConfigError) as info:
+        apply_overrides(Cfg(), [item])
+    assert str(info.value).startswith(message)
+    assert "cannot parse" not in str(info.value)
+
+
+def test_validate_rejects_non_finite_values_set_in_code():
+    with pytest.raises(ConfigError, match=r"^NaN is not allowed for gain"):
+        validate(dataclasses.replace(Cfg(), gain=float("nan")))
+    with pytest.raises(ConfigError, match=r"^inf is not allowed for q0\[2\]"):
+        validate(dataclasses.replace(Cfg(), q0=(0.0, 1.0, float("inf"))))

@@ -205,6 +205,8 @@ class Replay:
         c = self.client
         for name, b in self.bodies.items():
             if b["kind"] == "urdf":
+                if not b["q_columns"]:  # no time axis (e.g. dcc_audit): joints not in the trace
+                    continue
                 for j, col in zip(self.joints[name], b["q_columns"], strict=True):
                     p.resetJointState(self.ids[name][0], j, float(row[col]), physicsClientId=c)
                 if b.get("pose_columns"):
@@ -378,8 +380,11 @@ def check_run(run_dir: Path, n_rows: int = N_ROWS) -> Result:
                 res.fail("scene", f"{b['name']}: movable URDF joints {extra} have no q column")
         missing_q = [c for b in robots for c in b["q_columns"] if c not in trace.columns]
         if missing_q:
-            if "t" in trace.columns:
-                res.fail("scene", f"q_columns not in trace.csv: {missing_q}")
+            res.fail("scene", f"q_columns not in trace.csv: {missing_q}")
+            return res
+        if "t" not in trace.columns:
+            if any(b["q_columns"] for b in robots):
+                res.fail("scene", "a trace without time has robots with q_columns")
             return res  # no time axis (e.g. an audit of random segments): bodies only
         audit = [(name, r) for name, r in scene.get("sensors", {}).items()
                  if r.get("kind") == "tof_ring"]

@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
+import socket
+import subprocess
+import sys
+import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -16,8 +21,13 @@ from repro.runs.trace import (
     TRACKED_PACKAGES,
     TraceRecorder,
     config_hash,
+    count_trace_rows,
+    effective_manifest,
     load_run,
+    mark_if_gone,
+    process_gone,
     to_jsonable,
+    update_manifest,
 )
 
 
@@ -83,7 +93,7 @@ def test_schema_violation_raises_naming_the_key(tmp_path: Path) -> None:
 
 
 def test_rows_are_flushed_every_flush_every(tmp_path: Path) -> None:
-    rec = _recorder(tmp_path, flush_every=50)
+    rec = _recorder(tmp_path, flush_every=50, flush_interval_s=3600.0)
     for k in range(120):
         rec.record({"step": k})
     on_disk = pd.read_csv(tmp_path / "trace.csv")
@@ -221,3 +231,111 @@ def test_to_jsonable_rejects_unknown_objects() -> None:
     assert to_jsonable({"x": float("nan"), "y": np.int32(3)}) == {"x": "nan", "y": 3}
     with pytest.raises(ReproError, match="object"):
         to_jsonable({"f": object()})
+
+
+# --------------------------------------------------------------------------- dead runs (issue 7)
+
+
+def test_rows_are_flushed_at_least_every_flush_interval(tmp_path: Path) -> None:
+    rec = _recorder(tmp_path, flush_every=1000, flush_interval_s=0.05)
+    rec.record({"step": 0})  # the first row comes more than 0 s after the start: flushed
+    rec.record({"step": 1})
+    time.sleep(0.06)
+    rec.record({"step": 2})
+    assert count_trace_rows(tmp_path) == 3
+    rec.close()
+    with pytest.raises(ConfigError, match="flush_interval_s"):
+        _recorder(tmp_path / "bad", flush_interval_s=-1.0)
+
+
+def test_manifest_at_start_records_pid_host_and_start_time(tmp_path: Path) -> None:
+    rec = _recorder(tmp_path)
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert manifest["status"] == "running"
+    assert manifest["pid"] == os.getpid()
+    assert manifest["hostname"] == socket.gethostname()
+    assert manifest["started_at"].endswith("Z")
+    assert "boot_id" in manifest
+    rec.close()
+
+
+def test_count_trace_rows_skips_header_and_a_cut_off_line(tmp_path: Path) -> None:
+    assert count_trace_rows(tmp_path) == 0  # no trace.csv
+    (tmp_path / "trace.csv").write_text("t,x\n")
+    assert count_trace_rows(tmp_path) == 0
+    (tmp_path / "trace.csv").write_text("t,x\n0,1\n0.1,2\n0.2,")
+    assert count_trace_rows(tmp_path) == 2
+
+
+def _dead_pid() -> int:
+    proc = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    return int(proc.stdout)
+
+
+def _killed_run(path: Path, n_rows: int, **manifest_fields: object) -> None:
+    """A run as a SIGKILL leaves it: manifest 'running' with 0 rows, rows on disk."""
+    rec = _recorder(path, flush_every=1)
+    rec.set_scene({"bodies": []})
+    for k in range(n_rows):
+        rec.record({"t": k * 0.1, "step": k})
+    rec._trace_file.close()
+    rec._events_file.close()
+    if manifest_fields:
+        update_manifest(path, **manifest_fields)
+
+
+def test_running_run_of_a_live_process_is_left_alone(tmp_path: Path) -> None:
+    rec = _recorder(tmp_path)
+    rec.record({"t": 0.0})
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert process_gone(manifest, tmp_path) is None  # our own pid
+    assert effective_manifest(tmp_path) == manifest
+    assert mark_if_gone(tmp_path) is None
+    rec.close()
+    assert mark_if_gone(tmp_path) is None  # completed runs are never touched
+
+
+def test_dead_pid_on_this_host_reads_as_interrupted_with_counted_rows(tmp_path: Path) -> None:
+    _killed_run(tmp_path, 12, pid=_dead_pid())
+    on_disk = json.loads((tmp_path / "manifest.json").read_text())
+    assert (on_disk["status"], on_disk["n_rows"]) == ("running", 0)
+
+    seen = effective_manifest(tmp_path)
+    assert seen["status"] == "interrupted" and seen["n_rows"] == 12
+    assert seen["reason"].startswith("process gone: pid")
+    assert "12 rows" in seen["reason"] and seen["ended_at"].endswith("Z")
+    assert json.loads((tmp_path / "manifest.json").read_text()) == on_disk  # read only
+
+    assert mark_if_gone(tmp_path) == seen
+    assert json.loads((tmp_path / "manifest.json").read_text()) == seen
+    assert load_run(tmp_path).manifest["n_rows"] == len(load_run(tmp_path).trace) == 12
+    assert mark_if_gone(tmp_path) is None  # idempotent
+
+
+def test_other_host_is_gone_only_after_a_long_silence(tmp_path: Path) -> None:
+    _killed_run(tmp_path, 3, hostname="another-host.example", pid=1)
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert process_gone(manifest, tmp_path) is None  # files just written
+    later = time.time() + 7 * 3600
+    why = process_gone(manifest, tmp_path, now=later)
+    assert why is not None and "another-host.example" in why and "no update for 7.0 h" in why
+    assert effective_manifest(tmp_path, now=later)["status"] == "interrupted"
+    assert effective_manifest(tmp_path, now=later, stale_after_s=8 * 3600)["status"] == "running"
+
+
+def test_rebooted_host_means_the_process_is_gone(tmp_path: Path) -> None:
+    if not Path("/proc/sys/kernel/random/boot_id").exists():
+        pytest.skip("no boot id on this system")
+    _killed_run(tmp_path, 1, boot_id="an-earlier-boot")  # our pid, but another boot
+    assert "rebooted" in effective_manifest(tmp_path)["reason"]
+
+
+def test_update_manifest(tmp_path: Path) -> None:
+    with _recorder(tmp_path) as rec:
+        rec.record({"t": 0.0})
+    manifest = update_manifest(tmp_path, experiment="case1")
+    assert json.loads((tmp_path / "manifest.json").read_text()) == manifest
+    assert manifest["experiment"] == "case1" and tuple(manifest) == MANIFEST_KEYS
+    with pytest.raises(ReproError, match="cannot read manifest"):
+        update_manifest(tmp_path / "nope", experiment="x")

@@ -9,6 +9,10 @@ from repro.config import param
 SETTINGS = ("simulation", "experiment")
 CONTROLLERS = ("nmpc", "ibvs", "ibvs_saturated")
 
+# Allowed ranges (ours: what is physically meaningful for this robot and camera).
+DURATION_RANGE = (0.01, 600.0)  # [s]: at least one 10 ms MPC step, at most 10 minutes
+SEED_RANGE = (0, 2**32 - 1)  # numpy SeedSequence entropy: any 32-bit unsigned integer
+
 
 @dataclass(frozen=True)
 class Chan2011Config:
@@ -19,18 +23,21 @@ class Chan2011Config:
                             help="nmpc (eqs. 9-12); ibvs / ibvs_saturated: the baselines")
     Np: int = param(5, range=(2, 50), help="prediction horizon (Sec. III-A: 5)")
     dt: float = param(0.01, unit="s", range=(0.001, 1.0), help="MPC step (Sec. III-A: 10 ms)")
-    Q_weight: float = param(1.0, range=(0.0, None), help="Q = q I (Sec. III-A)")
-    W_weight: float = param(2500.0, range=(0.0, None), help="W = w I (Sec. III-A)")
+    Q_weight: float = param(1.0, unit="1/px^2", range=(0.0, 1e3), low_open=True,
+                            help="Q = q I (Sec. III-A); > 0: the NMPC needs an image cost")
+    W_weight: float = param(2500.0, unit="s^2/rad^2", range=(0.0, 1e6), low_open=True,
+                            help="W = w I (Sec. III-A; Sec. V uses 1e4); only W/Q matters, "
+                                 "beyond 1e6 the joints barely move")
     velocity_fraction: float = param(1.0, range=(0.001, 1.0),
                                      help="joint-speed limits as a fraction of the maximum")
-    duration: float = param(20.0, unit="s", range=(0.01, 600.0), help="run time")  # ours: the tail is slow (see REPORT)
+    duration: float = param(20.0, unit="s", range=DURATION_RANGE, help="run time")  # ours: the tail is slow (see REPORT)
     dcc: bool = param(False, help="dynamic collision checking (Sec. IV)")
     qpsol: str = param("qpoases", choices=("qpoases", "daqp"),
                        help="QP solver of the SQP (Gauss-Newton Hessian)")
     nlp_max_iter: int = param(100, range=(1, 10000),
                               help="SQP iteration limit")  # ours: GN-SQP needs up to ~40 here
     nlp_solver: str = param("sqp", choices=("sqp", "ipopt"), help="NLP method")
-    ibvs_gain: float = param(3.0, unit="1/s", range=(0.0, None),
+    ibvs_gain: float = param(3.0, unit="1/s", range=(0.0, 100.0), low_open=True,
                              help="lambda of the IBVS baselines")  # ours: matches the NMPC's initial decay (~3/s)
     physics_rate: float = param(1000.0, unit="Hz", range=(100.0, 10000.0),
                                 help="inner PID loop / physics (Sec. V-A: 1 kHz)")
@@ -42,11 +49,13 @@ class Chan2011Config:
                            help="PyBullet position gain of the inner PD loop")  # ours
     camera_mode: str = param("render", choices=("render", "exact"),
                              help="render = PyBullet image + OpenCV; exact = projection")
-    stop_px: float = param(0.5, unit="px", range=(0.0, None),
-                           help="stop when the RMS pixel error stays under this for 0.2 s")  # ours
-    snapshot_period: float = param(0.0, unit="s", range=(0.0, None),
-                                   help="save camera and scene images every ... s (0: none)")
-    seed: int = param(0, range=(0, None), help="seed (no random element yet)")
+    stop_px: float = param(0.5, unit="px", range=(0.0, 100.0),
+                           help="stop when the RMS pixel error stays under this for 0.2 s "
+                                "(1024 x 768 image)")  # ours
+    snapshot_period: float = param(0.0, unit="s", range=(0.0, 600.0),
+                                   help="save camera and scene images every ... s (0: none; "
+                                        "at most the longest duration)")
+    seed: int = param(0, range=SEED_RANGE, help="seed (no random element yet; 32-bit)")
     video: bool = param(False, help="also write an animated GIF of the run (video.gif)",
                         output_only=True)
 
@@ -73,14 +82,15 @@ class ExperimentConfig(Chan2011Config):
     setting: str = param("experiment", choices=SETTINGS, help="scene and target poses")
     Np: int = param(10, range=(2, 50), help="prediction horizon (Sec. V-A6: 10)")
     dt: float = param(0.1, unit="s", range=(0.001, 1.0), help="MPC step (Sec. V-A6: 0.1 s)")
-    W_weight: float = param(10000.0, range=(0.0, None), help="W = 10000 I (Sec. V-A6)")
+    W_weight: float = param(10000.0, unit="s^2/rad^2", range=(0.0, 1e6), low_open=True,
+                            help="W = 10000 I (Sec. V-A6)")
     velocity_fraction: float = param(0.05, range=(0.001, 1.0),
                                      help="5 % of the maximum speeds (Sec. V-A2)")
-    duration: float = param(90.0, unit="s", range=(0.01, 600.0), help="run time")  # ours: 5 % speeds are slow
+    duration: float = param(90.0, unit="s", range=DURATION_RANGE, help="run time")  # ours: 5 % speeds are slow
     dcc: bool = param(True, help="dynamic collision checking (Sec. IV)")
     inner_loop: str = param("pd", choices=("kinematic", "pd"),
                             help="PD tracking of the quintic references at 1 kHz (Sec. V-A5)")
-    snapshot_period: float = param(2.0, unit="s", range=(0.0, None),
+    snapshot_period: float = param(2.0, unit="s", range=(0.0, 600.0),
                                    help="frames for figs 12-13")  # ours
 
 

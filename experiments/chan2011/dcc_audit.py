@@ -33,7 +33,7 @@ class DCCAuditConfig:
                             help="largest joint change of a 'local' segment")  # ours
     resolution: float = param(0.002, unit="m", range=(1e-4, 0.05),
                               help="max swept distance between dense checks")  # ours
-    seed: int = param(0, range=(0, None), help="seed of the random segments")
+    seed: int = param(0, range=(0, 2**32 - 1), help="seed of the random segments (32-bit)")
 
 
 def _columns() -> Columns:
@@ -56,14 +56,14 @@ def _columns() -> Columns:
     return cols
 
 
-def run(config: DCCAuditConfig, out_dir: Path) -> Path:
+def run(config: DCCAuditConfig, out_dir: Path, experiment: str | None = None) -> Path:
     """Certify random segments with DCC, verify the certified ones densely."""
     validate(config)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     cols = _columns()
-    with TraceRecorder(out_dir, experiment=out_dir.name.split("__")[0], paper="chan2011",
-                       config=config, seed=config.seed) as rec, \
+    with TraceRecorder(out_dir, experiment=experiment or out_dir.name.split("__")[0],
+                       paper="chan2011", config=config, seed=config.seed) as rec, \
             Scene(WorldConfig(), run_dir=out_dir) as scene:
         scene.add_urdf("crs_a465", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
         for box in sc.OBSTACLES:

@@ -225,11 +225,11 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
                    snapshot_period=config.snapshot_period)
 
 
-def run(config: Chan2011Config, out_dir: Path) -> Path:
+def run(config: Chan2011Config, out_dir: Path, experiment: str | None = None) -> Path:
     """Run one chan2011 experiment and write its run files (see repro.sim.episode)."""
     check_config(config)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     ep = build(config, out_dir)
-    return run_episode(ep, out_dir, experiment=out_dir.name.split("__")[0], paper="chan2011",
-                       config=config, seed=config.seed)
+    return run_episode(ep, out_dir, experiment=experiment or out_dir.name.split("__")[0],
+                       paper="chan2011", config=config, seed=config.seed)

@@ -13,6 +13,18 @@ from repro.config import param
 CASES = ("case1", "case2", "case3", "parallel")
 RING_MODELS = ("coarse", "beta1", "exact")
 
+# Allowed ranges (ours: what is physically meaningful for this robot and these sensors).
+GAIN_RANGE = (0.0, 100.0)  # [1/s], open at 0
+GAIN_WHY = ("0 stops the task; the sampled loop e+ = (1 - gain/rate) e is stable only for "
+            "gain < 2 rate (60/s at 30 Hz)")
+THRESHOLD_RANGE = (0.005, 0.5)  # [m]
+THRESHOLD_WHY = ("below ~5 mm the 2 mm ToF noise reaches the obstacle; beyond 0.5 m "
+                 "(half the 1 m range) the rings keep the arm away from everything")
+DURATION_RANGE = (0.1, 600.0)  # [s]: at least 3 control steps, at most 10 minutes
+Q0_RANGE_DEG = (-360.0, 360.0)  # [deg]
+Q0_WHY = "within one turn; check_config enforces the Panda's joint limits"
+SEED_RANGE = (0, 2**32 - 1)  # numpy SeedSequence entropy: any 32-bit unsigned integer
+
 
 @dataclass(frozen=True)
 class Thomas2024Config:
@@ -20,30 +32,37 @@ class Thomas2024Config:
 
     case: str = param("case1", choices=CASES, help="scene: obstacle layout and start")
     # --- controller, thomas2024 Sec. V
-    lambda_4p: float = param(0.4, unit="1/s", range=(0.0, None),
-                             help="IBVS gain lambda_4p (Sec. V)")
-    mu: float = param(0.01, range=(0.0, None), help="QP regularisation mu (Sec. V)")
-    ring_gains: tuple[float, ...] = param((1.0, 3.0), unit="1/s",
-                                          help="CBF gains lambda_1, lambda_2 (table in Sec. V)")
-    thresholds: tuple[float, ...] = param((0.04, 0.08), unit="m",
-                                          help="delta* of ring 1, ring 2 (Sec. V)")
-    ring_models: tuple[str, ...] = param(("coarse", "coarse"),
+    lambda_4p: float = param(0.4, unit="1/s", range=GAIN_RANGE, low_open=True,
+                             help="IBVS gain lambda_4p (Sec. V); " + GAIN_WHY)
+    mu: float = param(0.01, range=(0.0, 10.0),
+                      help="QP regularisation mu (Sec. V); above ~10 it outweighs J^T J "
+                           "(entries ~1 in normalised units) and the robot barely moves")
+    ring_gains: tuple[float, ...] = param((1.0, 3.0), unit="1/s", range=GAIN_RANGE,
+                                          low_open=True,
+                                          help="CBF gains lambda_1, lambda_2 (table in Sec. V); "
+                                               + GAIN_WHY)
+    thresholds: tuple[float, ...] = param((0.04, 0.08), unit="m", range=THRESHOLD_RANGE,
+                                          help="delta* of ring 1, ring 2 (Sec. V); "
+                                               + THRESHOLD_WHY)
+    ring_models: tuple[str, ...] = param(("coarse", "coarse"), choices=RING_MODELS,
                                          help="interaction model per ring: coarse=(6), "
                                               "beta1=(5), exact=(2)")
     proximity: bool = param(True, help="CBF constraints on (False = ablation)")
-    eps_4p: float = param(0.005, range=(0.0, None),
-                          help="stop when ||e_4p|| <= eps_4p (normalised)")  # ours: ~2 px; the paper gives no value
-    eps_qd: float = param(0.01, range=(0.0, None),
-                          help="stop when ||grad L(0, kappa*)|| <= eps_qd (Sec. V-B)")
+    eps_4p: float = param(0.005, range=(0.0, 0.1),
+                          help="stop when ||e_4p|| <= eps_4p (normalised; 0.1 ~ 43 px)")  # ours: ~2 px; the paper gives no value
+    eps_qd: float = param(0.01, range=(0.0, 1.0),
+                          help="stop when ||grad L(0, kappa*)|| <= eps_qd (Sec. V-B); "
+                               "1 is of the order of the unconstrained gradient")
     stop_conditions: bool = param(True, help="apply the stopping conditions of Sec. III-C")
     control_rate: float = param(30.0, unit="Hz", range=(1.0, 1000.0),
                                 help="control loop rate (Sec. V: 30 Hz)")
     physics_rate: float = param(240.0, unit="Hz", range=(30.0, 10000.0),
                                 help="physics rate")  # ours: PyBullet's default step
-    duration: float = param(30.0, unit="s", range=(0.1, 600.0),
+    duration: float = param(30.0, unit="s", range=DURATION_RANGE,
                             help="maximum run time")  # ours: the paper's plots span ~10-30 s
     q0_deg: tuple[float, ...] = param((0.0, -60.0, 0.0, -90.0, 0.0, 100.0, 45.0), unit="deg",
-                                      help="initial joint positions (Sec. V-A)")
+                                      range=Q0_RANGE_DEG, help="initial joint positions "
+                                      "(Sec. V-A); " + Q0_WHY)
     # --- sensors
     camera_mode: str = param("render", choices=("render", "exact"),
                              help="render = PyBullet image + OpenCV; exact = projection")
@@ -55,7 +74,7 @@ class Thomas2024Config:
                            help="QP solver (the paper: ProxQP)")
     qp_max_iter: int = param(200, range=(1, 100000),
                              help="iteration budget per QP solve")  # ours: bounds an infeasible solve to ~2 ms
-    seed: int = param(0, range=(0, None), help="seed of the sensor noise")
+    seed: int = param(0, range=SEED_RANGE, help="seed of the sensor noise (32-bit)")
     video: bool = param(False, help="also write an animated GIF of the run (video.gif)",
                         output_only=True)
 
@@ -72,7 +91,7 @@ class Case1NoProximityConfig(Thomas2024Config):
 
     proximity: bool = param(False, help="CBF constraints on (False = ablation)")
     stop_conditions: bool = param(False, help="apply the stopping conditions of Sec. III-C")
-    duration: float = param(15.0, unit="s", range=(0.1, 600.0), help="maximum run time")  # ours
+    duration: float = param(15.0, unit="s", range=DURATION_RANGE, help="maximum run time")  # ours
 
 
 @dataclass(frozen=True)
@@ -80,11 +99,12 @@ class Case2Config(Thomas2024Config):
     """Case 2, local convergence: lambda = (1, 1), delta* = (4, 4) cm, (5) on ring 2."""
 
     case: str = param("case2", choices=CASES, help="scene: obstacle layout and start")
-    ring_gains: tuple[float, ...] = param((1.0, 1.0), unit="1/s",
+    ring_gains: tuple[float, ...] = param((1.0, 1.0), unit="1/s", range=GAIN_RANGE,
+                                          low_open=True,
                                           help="CBF gains lambda_1, lambda_2 (Sec. V-B)")
-    thresholds: tuple[float, ...] = param((0.04, 0.04), unit="m",
+    thresholds: tuple[float, ...] = param((0.04, 0.04), unit="m", range=THRESHOLD_RANGE,
                                           help="delta* of ring 1, ring 2 (Sec. V-B)")
-    ring_models: tuple[str, ...] = param(("coarse", "beta1"),
+    ring_models: tuple[str, ...] = param(("coarse", "beta1"), choices=RING_MODELS,
                                          help="(6) on ring 1, (5) with estimated normals "
                                               "on ring 2 (Sec. V-B)")
 
@@ -93,10 +113,10 @@ class Case2Config(Thomas2024Config):
 class Case2CoarseConfig(Case2Config):
     """Ablation of case 2 with the coarse model (6) on ring 2 (Sec. VI, eq. (24))."""
 
-    ring_models: tuple[str, ...] = param(("coarse", "coarse"),
+    ring_models: tuple[str, ...] = param(("coarse", "coarse"), choices=RING_MODELS,
                                          help="(6) on both rings (ablation)")
     stop_conditions: bool = param(False, help="run the full duration to expose oscillation")
-    duration: float = param(20.0, unit="s", range=(0.1, 600.0), help="maximum run time")  # ours
+    duration: float = param(20.0, unit="s", range=DURATION_RANGE, help="maximum run time")  # ours
 
 
 @dataclass(frozen=True)
@@ -104,12 +124,13 @@ class Case3Config(Thomas2024Config):
     """Case 3, dynamic obstacle: lambda = (1, 3), delta* = (4, 6) cm, model (6)."""
 
     case: str = param("case3", choices=CASES, help="scene: obstacle layout and start")
-    thresholds: tuple[float, ...] = param((0.04, 0.06), unit="m",
+    thresholds: tuple[float, ...] = param((0.04, 0.06), unit="m", range=THRESHOLD_RANGE,
                                           help="delta* of ring 1, ring 2 (Sec. V-C)")
     q0_deg: tuple[float, ...] = param((-20.0, -10.0, 0.0, -135.0, 0.0, 190.0, 45.0), unit="deg",
+                                      range=Q0_RANGE_DEG,
                                       help="start at the converged pose (Sec. V-C)")  # ours: = scene goal
     stop_conditions: bool = param(False, help="no stop: the hand comes after convergence")
-    duration: float = param(32.0, unit="s", range=(0.1, 600.0), help="run time")  # ours: paper's plot ~30 s
+    duration: float = param(32.0, unit="s", range=DURATION_RANGE, help="run time")  # ours: paper's plot ~30 s
 
 
 @dataclass(frozen=True)
@@ -117,10 +138,12 @@ class ParallelConfig(Thomas2024Config):
     """Sec. VI eq. (20): goal between two parallel planes at ring 2's threshold."""
 
     case: str = param("parallel", choices=CASES, help="scene: obstacle layout and start")
-    ring_gains: tuple[float, ...] = param((1.0, 1.0), unit="1/s", help="CBF gains")  # ours: as case 2
-    thresholds: tuple[float, ...] = param((0.04, 0.04), unit="m", help="delta*")  # ours: as case 2
+    ring_gains: tuple[float, ...] = param((1.0, 1.0), unit="1/s", range=GAIN_RANGE,
+                                          low_open=True, help="CBF gains")  # ours: as case 2
+    thresholds: tuple[float, ...] = param((0.04, 0.04), unit="m", range=THRESHOLD_RANGE,
+                                          help="delta*")  # ours: as case 2
     stop_conditions: bool = param(False, help="run the full duration to expose oscillation")
-    duration: float = param(20.0, unit="s", range=(0.1, 600.0), help="run time")  # ours
+    duration: float = param(20.0, unit="s", range=DURATION_RANGE, help="run time")  # ours
     proximity_noise: float = param(0.0, unit="m", range=(0.0, 0.1),
                                    help="noise-free: eq. (20) holds at the exact threshold")  # ours: see parallel_noisy
 

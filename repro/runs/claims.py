@@ -31,7 +31,7 @@ import pandas as pd
 
 from repro.errors import ConfigError, ReproError, UnknownChoiceError
 from repro.runs.registry import Paper, compute_config_hash, load_papers
-from repro.runs.trace import RunFiles, load_run
+from repro.runs.trace import RunFiles, effective_manifest, load_run
 
 __all__ = [
     "CLAIMS_COLUMNS",
@@ -251,7 +251,7 @@ def _load_runs(
         loaded = cache[run_dir]
         if isinstance(loaded, str):
             return loaded
-        status = loaded.manifest.get("status")
+        status = effective_manifest(run_dir, loaded.manifest).get("status")
         if status != "completed":
             reason = loaded.manifest.get("reason") or "no reason recorded"
             return f"run {name!r} did not complete (status {status!r}: {reason})"

@@ -18,13 +18,16 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import importlib
+import inspect
 import json
+import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from repro.config import check_declared, validate
 from repro.errors import ReproError, UnknownChoiceError
 
 __all__ = [
@@ -36,6 +39,8 @@ __all__ = [
     "all_experiments",
     "experiment_dir",
     "compute_config_hash",
+    "check_config",
+    "run_experiment",
     "is_stale",
 ]
 
@@ -50,16 +55,21 @@ class Experiment:
     ``config_cls()`` gives the paper's default configuration (a frozen
     dataclass). ``run(config, out_dir)`` writes trace files and a
     ``manifest.json`` into ``out_dir`` (normally ``results/<paper>/<name>``)
-    and returns ``out_dir``. ``slow`` experiments are skipped by
-    ``repro results`` unless ``--include-slow`` is given.
+    and returns ``out_dir``; if it accepts an ``experiment`` keyword,
+    :func:`run_experiment` passes the registered name through it. ``slow``
+    experiments are skipped by ``repro results`` unless ``--include-slow`` is
+    given. ``check(config)`` (optional) raises :class:`~repro.errors.ConfigError`
+    for a config that passes the field ranges but cannot run (lengths, joint
+    limits...); :func:`check_config` calls it before any folder is created.
     """
 
     name: str
     paper: str
     description: str
     config_cls: type
-    run: Callable[[Any, Path], Path]
+    run: Callable[..., Path]
     slow: bool = False
+    check: Callable[[Any], None] | None = None
 
     @property
     def id(self) -> str:
@@ -135,6 +145,10 @@ def _check_paper(ep_name: str, ep_value: str, obj: Any) -> None:
         if exp.name in seen:
             raise ReproError(f"{where}: experiment name {exp.name!r} is used twice")
         seen.add(exp.name)
+        try:
+            check_declared(exp.config_cls)
+        except ReproError as exc:
+            raise ReproError(f"{where}: experiment {exp.name!r}: {exc}") from exc
 
 
 def all_experiments(papers: Mapping[str, Paper]) -> list[Experiment]:
@@ -188,6 +202,61 @@ def compute_config_hash(config: Any) -> str:
     except ImportError:
         return _fallback_config_hash(config)
     return str(config_hash(config))
+
+
+def check_config(exp: Experiment, config: Any) -> None:
+    """Validate ``config`` for ``exp``: field ranges and choices, then ``exp.check``.
+
+    Call it before creating any output folder. Raises :class:`~repro.errors.ConfigError`.
+    """
+    validate(config)
+    if exp.check is not None:
+        exp.check(config)
+
+
+def _accepts_keyword(fn: Callable[..., Any], name: str) -> bool:
+    try:
+        parameters = inspect.signature(fn).parameters
+    except (TypeError, ValueError):
+        return False
+    param = parameters.get(name)
+    return param is not None and param.kind in (
+        inspect.Parameter.KEYWORD_ONLY,
+        inspect.Parameter.POSITIONAL_OR_KEYWORD,
+    )
+
+
+def run_experiment(exp: Experiment, config: Any, out_dir: Path) -> Path:
+    """Run ``exp`` with ``config`` into ``out_dir``; return the run's folder.
+
+    The manifest names the registered experiment (``exp.name``) whatever the folder is
+    called (``--out``, ``<name>__<hash>``): passed as ``experiment=`` when ``exp.run``
+    accepts that keyword, else written into the manifest the run wrote (also after an
+    interrupt or a crash).
+    """
+    out_dir = Path(out_dir)
+    kwargs = {"experiment": exp.name} if _accepts_keyword(exp.run, "experiment") else {}
+    started = time.time()
+    try:
+        result = exp.run(config, out_dir, **kwargs)
+    finally:
+        _name_experiment(out_dir, exp.name, since=started)
+    return Path(result) if result is not None else out_dir
+
+
+def _name_experiment(out_dir: Path, name: str, *, since: float) -> None:
+    """Set the manifest's ``experiment`` to ``name`` if this run wrote it (not an old one)."""
+    from repro.runs.trace import update_manifest
+
+    path = out_dir / MANIFEST_NAME
+    try:
+        if path.stat().st_mtime < since - 1.0:  # 1 s: coarse file-system clocks
+            return
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return
+    if isinstance(manifest, dict) and manifest.get("experiment") != name:
+        update_manifest(out_dir, experiment=name)
 
 
 def is_stale(exp: Experiment, results_dir: Path, config: Any) -> tuple[bool, str]:

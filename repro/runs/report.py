@@ -23,7 +23,7 @@ import pandas as pd
 
 from repro.errors import ReproError
 from repro.runs.claims import STATUSES, natural_key, read_claims_csv
-from repro.runs.trace import TRACKED_PACKAGES
+from repro.runs.trace import TRACKED_PACKAGES, effective_manifest
 
 __all__ = [
     "BENCH_COLUMNS",
@@ -146,6 +146,8 @@ def _read_manifests(paper_dir: Path) -> list[tuple[str, dict[str, Any]]]:
             manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
             if not isinstance(manifest, dict):
                 raise ValueError("not a JSON object")
+            # a "running" run whose process is gone is reported as interrupted
+            manifest = effective_manifest(manifest_path.parent, manifest)
         except (OSError, ValueError) as exc:
             manifest = {"status": "unreadable manifest", "reason": str(exc)}
         runs.append((run, manifest))

@@ -12,9 +12,11 @@ A run directory holds four files that can be audited or replayed without repro:
   git sha) and an optional ``summary`` set by the caller.
 - ``scene.json``: the simulated scene (bodies, poses...) as plain JSON.
 
-``manifest.json`` is written with status ``"running"`` when the recorder is created, so a
-process killed without unwinding (SIGKILL, power loss) leaves a run that claims treat as not
-completed rather than a stale manifest from an earlier run.
+``manifest.json`` is written with status ``"running"`` when the recorder is created, with the
+pid, hostname and boot id of the process, so a process killed without unwinding (SIGKILL,
+power loss) leaves a run that claims treat as not completed rather than a stale manifest from
+an earlier run; :func:`effective_manifest` reads such a run as ``"interrupted"`` ("process
+gone", rows counted in trace.csv) and :func:`mark_if_gone` rewrites its manifest so.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import json
 import math
 import os
 import platform
+import socket
 import subprocess
 import sys
 import time
@@ -57,10 +60,15 @@ __all__ = [
     "environment",
     "git_state",
     "add_vector",
+    "count_trace_rows",
+    "effective_manifest",
     "load_run",
     "load_run_if_present",
+    "mark_if_gone",
     "package_versions",
+    "process_gone",
     "to_jsonable",
+    "update_manifest",
 ]
 
 FORMAT_VERSION = 1
@@ -102,6 +110,9 @@ MANIFEST_KEYS = (
     "started_at",
     "ended_at",
     "wall_time_s",
+    "hostname",
+    "pid",
+    "boot_id",
     "python",
     "platform",
     "cpu",
@@ -121,6 +132,11 @@ _GIT_OUTPUT_PATHSPECS = (
 )
 
 Scalar = float | int | str | bool
+
+STALE_AFTER_S = 6 * 3600.0
+"""A ``running`` run of another host (whose pid cannot be checked) is taken as gone when none
+of its files changed for this long [s]; the trace is flushed at least every second while the
+process lives (``TraceRecorder.flush_interval_s``)."""
 
 
 # --------------------------------------------------------------------------- JSON helpers
@@ -297,7 +313,23 @@ def git_state(path: Path | None = None) -> tuple[str | None, bool | None]:
 
 
 def _utc_now() -> str:
-    return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+    return _utc_iso(datetime.now(UTC))
+
+
+def _utc_iso(when: datetime) -> str:
+    return when.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def _hostname() -> str:
+    return socket.gethostname()
+
+
+def _boot_id() -> str | None:
+    """Linux's id of the current boot (a pid of an earlier boot names another process)."""
+    try:
+        return Path("/proc/sys/kernel/random/boot_id").read_text(encoding="ascii").strip()
+    except OSError:
+        return None
 
 
 # --------------------------------------------------------------------------- recorder
@@ -339,6 +371,8 @@ class TraceRecorder:
         config: the run's configuration, a dataclass instance (a mapping is accepted too).
         seed: random seed of the run.
         flush_every: trace rows are written to disk every this many rows (and on close).
+        flush_interval_s: ... and at least every this many seconds of wall time, so that a
+            killed slow run (an NMPC step can take 0.1 s) loses at most that much.
     """
 
     def __init__(
@@ -350,6 +384,7 @@ class TraceRecorder:
         config: Any,
         seed: int,
         flush_every: int = 50,
+        flush_interval_s: float = 1.0,
     ) -> None:
         if not experiment or not isinstance(experiment, str):
             raise ConfigError(f"experiment must be a non-empty string, got {experiment!r}")
@@ -359,6 +394,8 @@ class TraceRecorder:
             raise ConfigError(f"seed must be an int, got {seed!r}")
         if isinstance(flush_every, bool) or not isinstance(flush_every, int) or flush_every < 1:
             raise ConfigError(f"flush_every must be an int >= 1, got {flush_every!r}")
+        if not (isinstance(flush_interval_s, int | float) and flush_interval_s >= 0):
+            raise ConfigError(f"flush_interval_s must be a number >= 0, got {flush_interval_s!r}")
         _check_config(config)
 
         self.out_dir = Path(out_dir)
@@ -366,6 +403,7 @@ class TraceRecorder:
         self.paper = paper
         self.seed = int(seed)
         self.flush_every = flush_every
+        self.flush_interval_s = float(flush_interval_s)
         self.summary: dict[str, Any] = {}
         """Caller-set results written into manifest.json at close (JSON-able values)."""
 
@@ -380,6 +418,7 @@ class TraceRecorder:
         self._manifest_path = self.out_dir / "manifest.json"
         self._started_at = _utc_now()
         self._t0 = time.perf_counter()
+        self._last_flush = self._t0
         self._git_sha, self._git_dirty = git_state()
 
         self.out_dir.mkdir(parents=True, exist_ok=True)
@@ -455,7 +494,8 @@ class TraceRecorder:
             [_format_cell(row[key], key) if key in row else "" for key in self._columns]
         )
         self._n_rows += 1
-        if len(self._pending) >= self.flush_every:
+        if (len(self._pending) >= self.flush_every
+                or time.perf_counter() - self._last_flush >= self.flush_interval_s):
             self.flush()
 
     def flush(self) -> None:
@@ -465,6 +505,7 @@ class TraceRecorder:
         self._trace_writer.writerows(self._pending)
         self._pending.clear()
         self._trace_file.flush()
+        self._last_flush = time.perf_counter()
 
     def event(self, t: float, step: int, kind: str, detail: str = "") -> None:
         """Append a row to events.csv and flush it at once.
@@ -523,6 +564,9 @@ class TraceRecorder:
             "started_at": self._started_at,
             "ended_at": ended_at,
             "wall_time_s": wall_time_s,
+            "hostname": _hostname(),
+            "pid": os.getpid(),
+            "boot_id": _boot_id(),
             "python": env["python"],
             "platform": env["platform"],
             "cpu": env["cpu"],
@@ -648,3 +692,148 @@ def load_run_if_present(base: Path, name: str) -> RunFiles | None:
     exists)."""
     path = Path(base) / name
     return load_run(path) if (path / "manifest.json").exists() else None
+
+
+# --------------------------------------------------------------------------- dead runs
+
+
+def count_trace_rows(run_dir: Path) -> int:
+    """Complete data rows of ``run_dir/trace.csv`` (header and a cut-off last line excluded)."""
+    path = Path(run_dir) / "trace.csv"
+    newlines = 0
+    try:
+        with open(path, "rb") as f:
+            while chunk := f.read(1 << 20):
+                newlines += chunk.count(b"\n")
+    except OSError:
+        return 0
+    return max(newlines - 1, 0)
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, owned by another user
+        return True
+    except (OSError, OverflowError, ValueError):
+        return False
+    return True
+
+
+def _last_update(run_dir: Path) -> float | None:
+    """Latest modification time [s since the epoch] of the run's files, None if none."""
+    times = []
+    for name in RUN_FILES:
+        try:
+            times.append((Path(run_dir) / name).stat().st_mtime)
+        except OSError:
+            continue
+    return max(times) if times else None
+
+
+def process_gone(
+    manifest: Mapping[str, Any],
+    run_dir: Path,
+    *,
+    now: float | None = None,
+    stale_after_s: float = STALE_AFTER_S,
+) -> str | None:
+    """Why a ``running`` run's process is known to be gone, or None (alive, or not running).
+
+    On this host (same hostname): gone if the boot id changed or the pid is not alive.
+    On another host, or for a manifest without a pid: gone if none of the run's files changed
+    for ``stale_after_s`` seconds (``now`` defaults to the current time).
+    """
+    if manifest.get("status") != "running":
+        return None
+    pid, host = manifest.get("pid"), manifest.get("hostname")
+    if isinstance(pid, int) and host == _hostname():
+        boot = manifest.get("boot_id")
+        if boot is not None and _boot_id() is not None and boot != _boot_id():
+            return f"process gone: host {host} rebooted since pid {pid} started"
+        if not _pid_alive(pid):
+            return f"process gone: pid {pid} on {host} is not running"
+        return None
+    last = _last_update(run_dir)
+    now = time.time() if now is None else now
+    if last is None or now - last >= stale_after_s:
+        where = f"pid {pid} on {host}" if isinstance(pid, int) else "an unknown process"
+        idle = "no run file" if last is None else f"no update for {(now - last) / 3600:.1f} h"
+        return f"process gone: {where}, {idle}"
+    return None
+
+
+def effective_manifest(
+    run_dir: Path,
+    manifest: Mapping[str, Any] | None = None,
+    *,
+    now: float | None = None,
+    stale_after_s: float = STALE_AFTER_S,
+) -> dict[str, Any]:
+    """The manifest of ``run_dir`` as it should be read (a copy; nothing is written).
+
+    A ``running`` manifest whose process is gone (:func:`process_gone`) comes back with
+    status ``"interrupted"``, reason ``"process gone: ..."``, ``n_rows`` counted in
+    trace.csv and ``ended_at`` the time of the last write. Other manifests are returned as is.
+    ``manifest`` defaults to ``run_dir/manifest.json``.
+
+    Raises:
+        ReproError: if ``manifest`` is None and manifest.json is missing or not a JSON object.
+    """
+    run_dir = Path(run_dir)
+    if manifest is None:
+        manifest = _read_manifest(run_dir / "manifest.json")
+    out = dict(manifest)
+    why = process_gone(out, run_dir, now=now, stale_after_s=stale_after_s)
+    if why is None:
+        return out
+    n_rows = count_trace_rows(run_dir)
+    last = _last_update(run_dir)
+    out.update(
+        status="interrupted",
+        reason=f"{why}; {n_rows} rows in trace.csv (rerun it)",
+        n_rows=n_rows,
+        ended_at=None if last is None else _utc_iso(datetime.fromtimestamp(last, UTC)),
+    )
+    return out
+
+
+def mark_if_gone(run_dir: Path, **kwargs: Any) -> dict[str, Any] | None:
+    """Rewrite ``run_dir/manifest.json`` as :func:`effective_manifest` reads it, if that
+    changes it; return the new manifest, or None when the run was not a dead ``running`` one
+    (or has no readable manifest). ``kwargs`` go to :func:`effective_manifest`."""
+    path = Path(run_dir) / "manifest.json"
+    try:
+        manifest = _read_manifest(path)
+    except ReproError:
+        return None
+    fixed = effective_manifest(run_dir, manifest, **kwargs)
+    if fixed == manifest:
+        return None
+    _write_json_atomic(path, fixed)
+    return fixed
+
+
+def update_manifest(run_dir: Path, **fields: Any) -> dict[str, Any]:
+    """Set ``fields`` in ``run_dir/manifest.json`` (written atomically); return the manifest.
+
+    Raises:
+        ReproError: if manifest.json is missing or not a JSON object.
+    """
+    path = Path(run_dir) / "manifest.json"
+    manifest = _read_manifest(path)
+    manifest.update(to_jsonable(fields))
+    _write_json_atomic(path, manifest)
+    return manifest
+
+
+def _read_manifest(path: Path) -> dict[str, Any]:
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ReproError(f"cannot read manifest {path}: {exc}") from exc
+    if not isinstance(manifest, dict):
+        raise ReproError(f"manifest {path} is not a JSON object")
+    return manifest
