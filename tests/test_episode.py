@@ -281,3 +281,31 @@ def test_a_missed_point_gets_its_ground_truth_cause(tmp_path: Path) -> None:
     lost = [c for c in ("s1", "s2", "s3", "s4") if not run.trace[f"{c}_found"].any()]
     assert lost and len(missed) == len(lost)
     assert missed["detail"].str.contains("outside the image").all()
+
+
+def test_two_robots_get_their_own_column_prefixes_and_distances(tmp_path: Path) -> None:
+    scene = _scene(tmp_path, 1 / 240, 1 / 30)
+    a = scene.add_urdf("arm_a", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS, column_prefix="a_")
+    b = scene.add_urdf("arm_b", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS,
+                       T_world_base=trans(0.9, 0.0, 0.0), column_prefix="b_")
+    scene.add_box("box", (0.1, 0.1, 0.1), trans(0.45, 0.0, 0.05), GREY)
+    a.reset(Q0)
+    b.reset(-Q0)
+    drives = {"arm_a": VelocityDrive(a), "arm_b": TorqueDrive(b)}
+
+    def ctrl(obs: Observation) -> StepResult:
+        return StepResult({"arm_a": np.full(6, 0.1), "arm_b": b.gravity_torques(obs.q["arm_b"])})
+
+    run = _run(Episode(scene, drives, ctrl, Columns(), 0.2), tmp_path)
+    df = run.trace
+    for pre in ("a_", "b_"):
+        assert {f"{pre}q1", f"{pre}qd6", f"{pre}u3", f"{pre}n_sat", f"{pre}dist_box",
+                f"{pre}dist_min"} <= set(df.columns)
+    assert "a_dist_arm_b" in df and "b_dist_arm_a" in df  # robots see each other...
+    np.testing.assert_allclose(df["a_dist_arm_b"], df["b_dist_arm_a"], atol=1e-6)
+    assert (df["a_dist_min"] == df["a_dist_box"]).all()  # ...but are not obstacles
+    assert np.abs(_q(df, "b_") + Q0).max() < 1e-6  # b holds still under gravity compensation
+    assert np.abs(_q(df, "a_")[-1] - Q0).max() > 0.015  # a moves (0.1 rad/s for 0.2 s)
+    bodies = {b["name"]: b for b in json.loads((tmp_path / "scene.json").read_text())["bodies"]}
+    assert bodies["arm_b"]["q_columns"][0] == "b_q1"
+    assert bodies["arm_b"]["base_pose"]["position"] == [0.9, 0.0, 0.0]

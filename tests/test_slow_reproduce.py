@@ -15,7 +15,7 @@ from repro.runs.registry import find_experiment, load_papers
 from repro.runs.trace import load_run
 
 RESULTS = Path(__file__).resolve().parent.parent / "results"
-TIMING = ("ctrl_s", "render_s", "qp_solve_s", "solve_s")
+TIMING = ("ctrl_s", "camera_render_s", "qp_solve_s", "solve_s")
 
 
 @pytest.mark.slow
