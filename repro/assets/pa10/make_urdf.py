@@ -1,0 +1,382 @@
+"""Write ``pa10_mini.urdf`` (next to this file) deterministically.
+
+    .venv/bin/python repro/assets/pa10/make_urdf.py
+
+Kinematics, limits and masses come from :mod:`repro.sim.pa10` (ARTE's DH table and
+limits, the manufacturer's 7-DoF link masses, the Barrett placeholder and the mini-robot
+sizes); the link shapes and colours below are ours (README.md says why). Every link's
+inertia is computed from its primitives, each of uniform density within the link (solid
+box / cylinder formulas plus the parallel-axis theorem); a link whose tensor is not
+diagonal in its own axes gets its inertial frame on the principal axes (PyBullet reads only
+the diagonal). Only boxes and cylinders: PyBullet and pinocchio both parse them.
+tests/test_pa10.py checks that the committed URDF equals this script's output.
+"""
+
+from __future__ import annotations
+
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from repro.sim.pa10 import (
+    ALL_JOINTS,
+    ALL_LIMITS,
+    BARRETT_PLACEHOLDER,
+    MINI_GEOMETRY,
+    MINI_MASSES,
+    PA10_FOREARM_ROLL_OFFSET,
+    PA10_LINK_MASSES,
+    pa10_dh_frames,
+)
+
+URDF_PATH = Path(__file__).resolve().with_name("pa10_mini.urdf")
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A primitive of a link, axis-aligned with the link frame.
+
+    Attributes:
+        kind: "box" or "cylinder".
+        size: box full sizes (x, y, z) [m]; cylinder (radius, length) [m].
+        xyz: centre in the link frame [m].
+        axis: cylinder axis, "z" or "y" of the link frame (boxes: "z").
+    """
+
+    kind: str
+    size: tuple[float, ...]
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    axis: str = "z"
+
+    def volume(self) -> float:
+        """[m^3]"""
+        if self.kind == "box":
+            return float(np.prod(self.size))
+        r, length = self.size
+        return float(np.pi * r**2 * length)
+
+    def inertia(self, mass: float) -> np.ndarray:
+        """3x3 inertia [kg m^2] of a solid body of ``mass`` [kg], about its centre, link axes."""
+        if self.kind == "box":
+            x, y, z = self.size
+            return mass / 12.0 * np.diag([y**2 + z**2, x**2 + z**2, x**2 + y**2])
+        r, length = self.size
+        radial = mass * (3.0 * r**2 + length**2) / 12.0
+        axial = mass * r**2 / 2.0
+        return np.diag([radial, axial, radial] if self.axis == "y" else [radial, radial, axial])
+
+
+@dataclass(frozen=True)
+class Body:
+    """A link: a mass [kg] spread uniformly over its shapes, and a colour (RGBA)."""
+
+    name: str
+    mass: float
+    shapes: tuple[Shape, ...]
+    rgba: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A joint: parent -> child at ``xyz`` [m] with rotation ``R`` (3x3, parent axes)."""
+
+    name: str
+    parent: str
+    child: str
+    xyz: tuple[float, ...]
+    R: tuple[tuple[float, ...], ...] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    axis: tuple[float, ...] | None = None  # None: fixed joint
+
+
+WHITE = (0.85, 0.85, 0.82, 1.0)
+BLUE = (0.15, 0.3, 0.6, 1.0)
+DARK = (0.25, 0.25, 0.28, 1.0)
+SILVER = (0.7, 0.7, 0.72, 1.0)
+ORANGE = (0.9, 0.5, 0.1, 1.0)
+BLACK = (0.08, 0.08, 0.08, 1.0)
+
+_M = PA10_LINK_MASSES
+_G = MINI_GEOMETRY
+_H = BARRETT_PLACEHOLDER
+
+# ours: PA-10 shapes sized like the real arm, guided by the collision primitives of
+# Choreonoid's PA10.body (base column r 0.115, arm tubes r 0.05-0.06, wrist r 0.035-0.045).
+# Link frames: at the joint origins (README), parallel to the base frame at q = 0.
+# Shapes of one link do not overlap, so uniform density per link is meaningful.
+PA10_BODIES = (
+    Body("pa10_link0", _M[0], (
+        Shape("cylinder", (0.115, 0.20), (0.0, 0.0, 0.10)),                 # base column
+    ), WHITE),
+    Body("pa10_link1", _M[1], (
+        Shape("cylinder", (0.115, 0.02), (0.0, 0.0, 0.21)),                 # turntable
+        Shape("cylinder", (0.09, 0.035), (0.0, 0.0, 0.2375)),               # pedestal
+        Shape("cylinder", (0.06, 0.23), (0.0, 0.0, 0.315), "y"),            # shoulder
+    ), WHITE),
+    Body("pa10_link2", _M[2], (
+        Shape("cylinder", (0.06, 0.33), (0.0, 0.0, 0.225)),                 # upper arm
+    ), WHITE),
+    Body("pa10_link3", _M[3], (
+        Shape("cylinder", (0.06, 0.12), (0.0, 0.0, 0.0), "y"),              # elbow
+        Shape("cylinder", (0.05, 0.19), (0.0, 0.0, 0.155)),                 # lower forearm
+    ), BLUE),
+    Body("pa10_link4", _M[4], (
+        Shape("cylinder", (0.06, 0.07), (0.0, 0.0, 0.035)),                 # roll housing
+        Shape("box", (0.07, 0.03, 0.21), (0.0, 0.065, 0.175)),              # wrist yoke +y
+        Shape("box", (0.07, 0.03, 0.21), (0.0, -0.065, 0.175)),             # wrist yoke -y
+    ), WHITE),
+    Body("pa10_link5", _M[5], (
+        Shape("cylinder", (0.045, 0.10), (0.0, 0.0, 0.0), "y"),             # wrist housing
+        Shape("cylinder", (0.035, 0.03), (0.0, 0.0, 0.06)),                 # wrist stub
+    ), BLUE),
+    Body("pa10_link6", _M[6], (
+        Shape("cylinder", (0.04, 0.005), (0.0, 0.0, -0.0025)),              # flange disc
+    ), DARK),
+)
+
+
+def _hand_bodies() -> tuple[Body, ...]:
+    """The BH8-282 placeholder: base (wrist cylinder, spine, palm plate) and one box link
+    per phalanx (link x along the phalanx, y towards the grasp, z the flexion axis)."""
+    r, length = _H.wrist_cylinder
+    spine, palm = _H.spine_box, _H.palm_box
+    base = Body("hand_base", _H.base_mass, (
+        Shape("cylinder", (r, length), (0.0, 0.0, length / 2)),
+        Shape("box", spine, (0.0, 0.0, length + spine[2] / 2)),
+        Shape("box", palm, (0.0, 0.0, length + spine[2] + palm[2] / 2)),
+    ), DARK)
+    v_prox, v_dist = float(np.prod(_H.proximal_size)), float(np.prod(_H.distal_size))
+    m_prox = _H.finger_mass * v_prox / (v_prox + v_dist)
+    fingers = []
+    for k in range(1, 4):
+        for part, size, mass in (("proximal", _H.proximal_size, m_prox),
+                                 ("distal", _H.distal_size, _H.finger_mass - m_prox)):
+            fingers.append(Body(f"hand_finger{k}_{part}", mass,
+                                (Shape("box", size, (size[0] / 2, 0.0, 0.0)),), SILVER))
+    return (base, *fingers)
+
+
+def _mini_bodies() -> tuple[Body, ...]:
+    """The RRR mini-robot (ours): clamp ring, arm + post + joint-2 servo, tube + joint-3
+    servo, camera bracket, camera body (its frame at the optical centre)."""
+    R, h2, l2, l3 = _G.radius, _G.joint2_height, _G.link2, _G.link3
+    m = MINI_MASSES
+    return (
+        Body("mini_base", m["mini_base"], (
+            Shape("cylinder", (0.065, 0.03), (0.0, 0.0, -0.015)),            # clamp ring
+        ), ORANGE),
+        Body("mini_link1", m["mini_link1"], (
+            Shape("box", (R + 0.015 - 0.07, 0.03, 0.03),
+                  ((0.07 + R + 0.015) / 2, 0.0, -0.015)),                    # radial arm
+            Shape("box", (0.03, 0.03, h2 - 0.02), (R, 0.0, (h2 - 0.02) / 2)),  # post
+            Shape("cylinder", (0.02, 0.04), (R, 0.0, h2), "y"),             # joint-2 servo
+        ), ORANGE),
+        Body("mini_link2", m["mini_link2"], (
+            Shape("box", (0.02, 0.02, l2 - 0.038), (0.0, 0.0, 0.02 + (l2 - 0.038) / 2)),
+            Shape("cylinder", (0.018, 0.036), (0.0, 0.0, l2), "y"),         # joint-3 servo
+        ), ORANGE),
+        Body("mini_link3", m["mini_link3"], (
+            Shape("box", (0.03, 0.03, 0.012), (0.0, 0.0, 0.024)),           # bracket
+        ), ORANGE),
+        # ours: GigE camera with lens as a 0.04 x 0.04 x 0.04 m box along the optical
+        # axis, its front at the optical centre (the camera frame), its back on the bracket.
+        Body("mini_camera", m["mini_camera"], (
+            Shape("box", (0.04, 0.04, l3 - 0.03), (0.0, 0.0, -(l3 - 0.03) / 2)),
+        ), BLACK),
+    )
+
+
+BODIES = PA10_BODIES + _hand_bodies() + _mini_bodies()
+#: Frame-only links (no mass, no geometry).
+FRAMES = ("pa10_flange", "hand_palm", "mini_camera_optical")
+
+_I3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+def _tup(a: np.ndarray) -> tuple[tuple[float, ...], ...]:
+    return tuple(tuple(float(v) for v in row) for row in np.asarray(a))
+
+
+def _pa10_joints() -> tuple[Joint, ...]:
+    """PA-10 joints from the DH frames at q = 0: joint i on the DH axis z_{i-1}, at the
+    origin of DH frame i-1, except joint 4 (forearm roll, PA10_FOREARM_ROLL_OFFSET up the
+    forearm) and joint 6 (at the flange, d6 out). All link frames parallel to the base."""
+    T0 = pa10_dh_frames(np.zeros(6))
+    shift = (0.0, 0.0, 0.0, PA10_FOREARM_ROLL_OFFSET, 0.0, T0[6][2, 3] - T0[5][2, 3])
+    origins = [T0[i][:3, 3] + shift[i] * T0[i][:3, 2] for i in range(6)]
+    joints = []
+    prev = np.zeros(3)
+    for i in range(6):
+        joints.append(Joint(ALL_JOINTS[i], f"pa10_link{i}", f"pa10_link{i + 1}",
+                            tuple(origins[i] - prev), axis=tuple(T0[i][:3, 2])))
+        prev = origins[i]
+    # DH frame 6 = the flange: at joint 6's origin, rotated as T_06(0).
+    joints.append(Joint("pa10_flange_joint", "pa10_link6", "pa10_flange",
+                        tuple(T0[6][:3, 3] - prev), _tup(T0[6][:3, :3])))
+    return tuple(joints)
+
+
+def _finger_rotation(outward: int, angle: float) -> np.ndarray:
+    """Rotation of a proximal phalanx frame in the hand frame: x along the phalanx
+    (``angle`` [rad] up from the outward direction), z the flexion axis, y towards the grasp."""
+    o, up = np.array([0.0, outward, 0.0]), np.array([0.0, 0.0, 1.0])
+    x = np.cos(angle) * o + np.sin(angle) * up
+    z = np.cross(o, up)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def _hand_joints() -> tuple[Joint, ...]:
+    joints = [
+        Joint("hand_base_joint", "pa10_flange", "hand_base", (0.0, 0.0, 0.0)),
+        Joint("hand_palm_joint", "hand_base", "hand_palm", (0.0, 0.0, _H.palm_height)),
+    ]
+    c, s = np.cos(_H.distal_angle), np.sin(_H.distal_angle)
+    R_dist = ((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0))
+    for k, (knuckle, out) in enumerate(zip(_H.knuckles, _H.outward, strict=True), start=1):
+        joints.append(Joint(f"hand_finger{k}_proximal_joint", "hand_base",
+                            f"hand_finger{k}_proximal", knuckle,
+                            _tup(_finger_rotation(out, _H.proximal_angle))))
+        joints.append(Joint(f"hand_finger{k}_distal_joint", f"hand_finger{k}_proximal",
+                            f"hand_finger{k}_distal", (_H.proximal_size[0], 0.0, 0.0), R_dist))
+    return tuple(joints)
+
+
+def _mini_joints() -> tuple[Joint, ...]:
+    # Camera frame in mini_link3: Rz(-90 deg): optical x = -y, optical y = +x (radially
+    # outward at q = 0), optical z = +z (forward).
+    R_cam = ((0.0, 1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    return (
+        Joint("mini_base_joint", "pa10_flange", "mini_base", (0.0, 0.0, 0.0)),
+        Joint("mini_joint1", "mini_base", "mini_link1", (0.0, 0.0, 0.0), axis=(0.0, 0.0, 1.0)),
+        Joint("mini_joint2", "mini_link1", "mini_link2", (_G.radius, 0.0, _G.joint2_height),
+              axis=(0.0, -1.0, 0.0)),
+        Joint("mini_joint3", "mini_link2", "mini_link3", (0.0, 0.0, _G.link2),
+              axis=(0.0, -1.0, 0.0)),
+        Joint("mini_camera_joint", "mini_link3", "mini_camera", (0.0, 0.0, _G.link3), R_cam),
+        Joint("mini_camera_optical_joint", "mini_camera", "mini_camera_optical",
+              (0.0, 0.0, 0.0)),
+    )
+
+
+def joints() -> tuple[Joint, ...]:
+    """Every joint of the tree, parents first."""
+    return _pa10_joints() + _hand_joints() + _mini_joints()
+
+
+def _f(v: float) -> str:
+    v = round(float(v), 12) + 0.0  # + 0.0: no "-0"
+    return f"{v:.12g}"
+
+
+def _v(vs: tuple[float, ...] | np.ndarray) -> str:
+    return " ".join(_f(v) for v in vs)
+
+
+def _rpy(R: tuple[tuple[float, ...], ...] | np.ndarray) -> tuple[float, float, float]:
+    """URDF rpy [rad] of a rotation matrix (entries within 1e-12 of 0 snapped to 0)."""
+    M = np.array(R, dtype=float)
+    M[np.abs(M) < 1e-12] = 0.0
+    r, p, y = Rotation.from_matrix(M).as_euler("xyz")
+    return float(r), float(p), float(y)
+
+
+def mass_properties(body: Body) -> tuple[np.ndarray, np.ndarray]:
+    """Centre of mass [m] and inertia about it [kg m^2], link axes."""
+    vols = np.array([s.volume() for s in body.shapes])
+    masses = body.mass * vols / vols.sum()
+    centres = np.array([s.xyz for s in body.shapes])
+    com = masses @ centres / body.mass
+    inertia = np.zeros((3, 3))
+    for s, m, c in zip(body.shapes, masses, centres, strict=True):
+        d = c - com
+        inertia += s.inertia(m) + m * (d @ d * np.eye(3) - np.outer(d, d))
+    return com, inertia
+
+
+def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(moments [kg m^2], rotation R_link_inertial) with ``inertia = R diag(moments) R^T``.
+
+    Identity when the tensor is already diagonal; otherwise the eigenvectors, each signed so
+    that its largest component is positive, the last flipped if needed to make R proper.
+    """
+    off = inertia - np.diag(np.diag(inertia))
+    if np.abs(off).max() <= 1e-12 * np.abs(inertia).max():
+        return np.diag(inertia).copy(), np.eye(3)
+    moments, R = np.linalg.eigh(inertia)
+    for k in range(3):
+        if R[np.argmax(np.abs(R[:, k])), k] < 0:
+            R[:, k] *= -1.0
+    if np.linalg.det(R) < 0:
+        R[:, 2] *= -1.0
+    return moments, R
+
+
+def _geometry(parent: ET.Element, s: Shape) -> None:
+    rpy = (np.pi / 2, 0.0, 0.0) if s.axis == "y" else (0.0, 0.0, 0.0)
+    ET.SubElement(parent, "origin", xyz=_v(s.xyz), rpy=_v(rpy))
+    geom = ET.SubElement(parent, "geometry")
+    if s.kind == "box":
+        ET.SubElement(geom, "box", size=_v(s.size))
+    else:
+        ET.SubElement(geom, "cylinder", radius=_f(s.size[0]), length=_f(s.size[1]))
+
+
+def _link(robot: ET.Element, body: Body | None, name: str) -> None:
+    link = ET.SubElement(robot, "link", name=name)
+    inertial = ET.SubElement(link, "inertial")
+    if body is None:  # a frame: no mass
+        ET.SubElement(inertial, "origin", xyz="0 0 0", rpy="0 0 0")
+        ET.SubElement(inertial, "mass", value="0")
+        ET.SubElement(inertial, "inertia", ixx="0", ixy="0", ixz="0", iyy="0", iyz="0",
+                      izz="0")
+        return
+    com, inertia = mass_properties(body)
+    moments, R = principal_axes(inertia)
+    ET.SubElement(inertial, "origin", xyz=_v(com), rpy=_v(_rpy(R)))
+    ET.SubElement(inertial, "mass", value=_f(body.mass))
+    ET.SubElement(inertial, "inertia", ixx=_f(moments[0]), ixy="0", ixz="0",
+                  iyy=_f(moments[1]), iyz="0", izz=_f(moments[2]))
+    for k, s in enumerate(body.shapes):
+        vis = ET.SubElement(link, "visual")
+        _geometry(vis, s)
+        mat = ET.SubElement(vis, "material", name=f"{body.name}_color{k}")
+        ET.SubElement(mat, "color", rgba=_v(body.rgba))
+    for s in body.shapes:
+        _geometry(ET.SubElement(link, "collision"), s)
+
+
+def build_urdf() -> str:
+    """The URDF text (deterministic)."""
+    robot = ET.Element("robot", name="pa10_mini")
+    robot.append(ET.Comment(
+        " Generated by make_urdf.py (do not edit); README.md gives the source of every number. "))
+    bodies = {b.name: b for b in BODIES}
+    _link(robot, bodies["pa10_link0"], "pa10_link0")
+    for j in joints():
+        _link(robot, bodies.get(j.child), j.child)
+        kind = "fixed" if j.axis is None else "revolute"
+        joint = ET.SubElement(robot, "joint", name=j.name, type=kind)
+        ET.SubElement(joint, "parent", link=j.parent)
+        ET.SubElement(joint, "child", link=j.child)
+        ET.SubElement(joint, "origin", xyz=_v(j.xyz), rpy=_v(_rpy(j.R)))
+        if j.axis is not None:
+            i = ALL_JOINTS.index(j.name)
+            ET.SubElement(joint, "axis", xyz=_v(j.axis))
+            ET.SubElement(joint, "limit", lower=_f(ALL_LIMITS.q_min[i]),
+                          upper=_f(ALL_LIMITS.q_max[i]), velocity=_f(ALL_LIMITS.qd_max[i]),
+                          effort=_f(ALL_LIMITS.tau_max[i]))
+    ET.indent(robot)
+    return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
+
+
+def main() -> int:
+    URDF_PATH.write_text(build_urdf())
+    print(f"wrote {URDF_PATH}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
