@@ -309,3 +309,50 @@ def test_two_robots_get_their_own_column_prefixes_and_distances(tmp_path: Path) 
     bodies = {b["name"]: b for b in json.loads((tmp_path / "scene.json").read_text())["bodies"]}
     assert bodies["arm_b"]["q_columns"][0] == "b_q1"
     assert bodies["arm_b"]["base_pose"]["position"] == [0.9, 0.0, 0.0]
+
+
+def test_joint_groups_of_one_urdf_have_their_own_drives_columns_and_distances(
+        tmp_path: Path) -> None:
+    """pomares2011's layout: one URDF (PA-10 + mini-robot), the PA-10 under a velocity drive,
+    the mini-robot under torque (gravity compensation), a camera every 5 control steps."""
+    from repro.geometry import Rx
+    from repro.sim.pa10 import ALL_JOINTS, ALL_LIMITS, MINI_JOINTS, PA10_JOINTS, pa10_urdf_path
+    from repro.sim.robot import JointGroup
+
+    scene = _scene(tmp_path, 1e-3, 1e-3, render=True)
+    chain = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS)
+    q0 = np.array([0.0, 0.3, 0.9, 0.0, 0.6, 0.0, 0.0, -0.3, 0.4])
+    chain.reset(q0)
+    arm = JointGroup(chain, "arm", PA10_JOINTS, "pa10_", owns_base=True)
+    mini = JointGroup(chain, "mini", MINI_JOINTS, "mini_")
+    assert set(arm.links).isdisjoint(mini.links) and -1 in arm.links and mini.links
+    T_cam = chain.frame_pose("mini_camera_optical", q0)
+    scene.add_dot_target("target", DotTarget.square(0.03, 0.005, (0.1, 0.1)),
+                         T_cam @ trans(0, 0, 0.3) @ Rx(np.pi))
+    # a box 15 cm to the side of the mini-robot's camera: nearer the mini-robot than the arm
+    scene.add_box("box", (0.05, 0.05, 0.05), trans(*(T_cam[:3, 3] + 0.15 * T_cam[:3, 0])),
+                  GREY, render=False)
+    rig = CameraRig("camera", "s", Camera(Intrinsics.centered(320, 240, 300.0), mode="exact"),
+                    chain, "mini_camera_optical", np.eye(4), "target", period=5)
+    v = np.array([0.05, 0, 0, 0, 0, 0])
+
+    def ctrl(obs: Observation) -> StepResult:
+        assert obs.q["pa10"].shape == (9,) and obs.q["mini"].shape == (3,)
+        # gravity compensation + a stiff joint PD: the mini-robot holds its pose while the
+        # arm it sits on turns (a free joint would keep its absolute orientation instead)
+        qm, qdm = obs.q["mini"], obs.qd["mini"]
+        return StepResult({"arm": v, "mini": mini.gravity_torques() + 5.0 * (q0[6:] - qm)
+                           - 0.05 * qdm})
+
+    run = _run(Episode(scene, {"arm": VelocityDrive(arm), "mini": TorqueDrive(mini)}, ctrl,
+                       Columns(), 0.3, cameras=[rig]), tmp_path)
+    df = run.trace
+    assert {"pa10_q6", "mini_q3", "pa10_dist_box", "mini_dist_box", "mini_u3"} <= set(df.columns)
+    assert "pa10_q7" not in df and "mini_q4" not in df
+    assert df["mini_dist_box"].iloc[0] < df["pa10_dist_box"].iloc[0] - 0.01  # per group
+    np.testing.assert_allclose(df["pa10_q1"].iloc[-1] - q0[0], 0.05 * 0.3, atol=2e-3)
+    assert np.abs(df[["mini_q1", "mini_q2", "mini_q3"]].to_numpy() - q0[6:]).max() < 0.02
+    new = df["camera_new_frame"].to_numpy(bool)
+    assert new[::5].all() and not new[1::5].any()
+    held = df["s1_u"].to_numpy()
+    assert np.all(held[1:5] == held[0]) and held[5] != held[0]  # held between frames

@@ -26,7 +26,7 @@ import pybullet as p
 
 from repro.control.interpolation import quintic
 from repro.errors import UnknownChoiceError
-from repro.sim.robot import Robot
+from repro.sim.robot import JointSet
 
 __all__ = ["ACTUATION_MODES", "Drive", "PositionReferenceDrive", "TorqueDrive", "VelocityDrive"]
 
@@ -39,7 +39,7 @@ IDEAL_DRIVE_FORCE = 1.0e5
 class Drive(Protocol):
     """What the episode runner needs of a drive."""
 
-    robot: Robot
+    robot: JointSet
     mode: str
     unit: str  # unit of the command [rad/s or N m]
 
@@ -62,7 +62,7 @@ class VelocityDrive:
     mode = "velocity"
     unit = "rad/s"
 
-    def __init__(self, robot: Robot) -> None:
+    def __init__(self, robot: JointSet) -> None:
         self.robot = robot
         self.qd_max = np.asarray(robot.limits.qd_max, dtype=float)
         robot.velocity_mode()
@@ -96,7 +96,7 @@ class PositionReferenceDrive:
     unit = "rad/s"
     INNER = ("pd", "kinematic")
 
-    def __init__(self, robot: Robot, inner: str = "pd", position_gain: float = 0.2) -> None:
+    def __init__(self, robot: JointSet, inner: str = "pd", position_gain: float = 0.2) -> None:
         if inner not in self.INNER:
             raise UnknownChoiceError("inner loop", inner, self.INNER)
         self.robot, self.inner, self.gain = robot, inner, position_gain
@@ -140,7 +140,7 @@ class TorqueDrive:
     mode = "torque"
     unit = "N m"
 
-    def __init__(self, robot: Robot) -> None:
+    def __init__(self, robot: JointSet) -> None:
         self.robot = robot
         self.tau_max = np.asarray(robot.limits.tau_max, dtype=float)
         self._tau = np.zeros(robot.n)

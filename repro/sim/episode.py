@@ -82,6 +82,9 @@ class CameraRig:
         T_frame_camera: true pose of the camera frame (x right, y down, z forward) in it.
         target: name of the scene's ``dot_target`` body.
         tol_px: a detection farther than this from the exact projection is an event [px].
+        period: control steps between two frames (a 200 fps camera under a 1 kHz torque
+            loop: 5); in between, the controller gets the last frame's points (held) and the
+            trace repeats that frame's columns, with ``<name>_new_frame`` False.
     """
 
     name: str
@@ -92,6 +95,7 @@ class CameraRig:
     T_frame_camera: np.ndarray
     target: str
     tol_px: float = 2.0
+    period: int = 1
 
     def pose(self, q: np.ndarray) -> np.ndarray:
         """T_world_camera (4x4) at joint positions ``q`` of the carrying robot."""
@@ -207,7 +211,7 @@ def runner_columns(ep: Episode) -> Columns:
         cols.add(f"{pre}n_sat", "-", f"number of {name} joints whose command the drive "
                  f"clipped to {'tau_max' if drive.mode == 'torque' else 'qd_max'}")
         for body in ep.scene.bodies.values():
-            if body.collision and body.robot is not r:
+            if body.collision and body.robot is not getattr(r, "robot", r):
                 cols.add(f"{pre}dist_{body.name}", "m", f"ground truth: minimum distance "
                          f"between the collision geometry of {name} and {body.name} (PyBullet "
                          f"closest points, minimum over its parts; < 0 penetration; capped at "
@@ -232,6 +236,9 @@ def runner_columns(ep: Episode) -> Columns:
         cols.add(f"{s}{{i}}_err_px", "px", "audit: distance between detection and exact "
                  "projection of point {i} (NaN if not found)", n=n, audit=True)
         cols.add(f"{cam.name}_render_s", "s", f"{cam.name}: wall time of render + detection")
+        if cam.period > 1:
+            cols.add(f"{cam.name}_new_frame", "bool", f"{cam.name}: a new frame was taken at "
+                     f"this step (every {cam.period} control steps; else the last one is held)")
         for c, unit in zip(pose_columns(cam.name), ("m",) * 3 + ("-",) * 4, strict=True):
             cols.add(c, unit, f"audit: true pose of the {cam.name} optical frame in the world "
                      "(position, quaternion xyzw)", audit=True)
@@ -302,10 +309,14 @@ class _Runner:
         self.ep, self.rec, self.out_dir = ep, rec, out_dir
         self.cols = runner_columns(ep).extend(ep.columns)
         self.robots = {name: d.robot for name, d in ep.drives.items()}
+        # the whole chains (cameras need every joint of the robot carrying them)
+        self.chains = {getattr(r, "robot", r).name: getattr(r, "robot", r)
+                       for r in self.robots.values()}
         self.frames: list[np.ndarray] = []
         self.audit = {c.name: _Audit() for c in ep.cameras}
         self._flags: dict[str, bool] = {}
         self.collided: set[tuple[str, str]] = set()
+        self.held: dict[str, tuple[Features, dict[str, Scalar]]] = {}
         self.t_ctrl = 0.0
 
     def onset(self, key: str, now: bool, t: float, k: int, kind: str, detail: str,
@@ -320,6 +331,22 @@ class _Runner:
 
     def measure(self, cam: CameraRig, q: np.ndarray, t: float, k: int,
                 row: dict[str, Scalar]) -> Features:
+        """Take a frame every ``cam.period`` steps; hold the last one in between."""
+        held = self.held.get(cam.name)
+        if held is not None and k % cam.period:
+            feats, cols = held
+            row.update(cols)
+            row[f"{cam.name}_new_frame"] = False
+            return feats
+        before = set(row)
+        feats = self._measure(cam, q, t, k, row)
+        if cam.period > 1:
+            row[f"{cam.name}_new_frame"] = True
+        self.held[cam.name] = (feats, {c: v for c, v in row.items() if c not in before})
+        return feats
+
+    def _measure(self, cam: CameraRig, q: np.ndarray, t: float, k: int,
+                 row: dict[str, Scalar]) -> Features:
         scene = self.ep.scene
         body = scene[cam.target]
         target = body.dot_target
@@ -423,6 +450,9 @@ class _Runner:
                 ep.scene.move(name, T_of_t(t))
             q = {name: r.q() for name, r in self.robots.items()}
             qd = {name: r.qd() for name, r in self.robots.items()}
+            for name, chain in self.chains.items():
+                q.setdefault(name, chain.q())
+                qd.setdefault(name, chain.qd())
             feats = {c.name: self.measure(c, q[c.robot.name], t, k, row) for c in ep.cameras}
             readings = {s.name: s.read(t, q) for s in ep.sensors}
             failed_sensor = None

@@ -57,7 +57,96 @@ class JointLimits:
                                   f"entries, expected {n}")
 
 
-class Robot:
+class JointSet:
+    """Joint state and motor commands of a set of joints of one PyBullet body.
+
+    Subclasses set ``body``, ``client``, ``pb_joints`` (PyBullet joint indices), ``n`` and
+    ``limits``: :class:`Robot` (every controlled joint of a URDF) and :class:`JointGroup`
+    (a subset, e.g. the PA-10 and the mini-robot of one URDF, driven separately).
+    """
+
+    body: int
+    client: int
+    pb_joints: list[int]
+    n: int
+    limits: JointLimits
+    name: str
+    column_prefix: str
+
+    def gravity_torques(self, q: np.ndarray) -> np.ndarray:
+        """g(q) of these joints [N m] (implemented by the subclasses)."""
+        raise NotImplementedError
+
+    def q(self) -> np.ndarray:
+        """Joint positions [rad], control order."""
+        states = p.getJointStates(self.body, self.pb_joints, physicsClientId=self.client)
+        return np.array([s[0] for s in states])
+
+    def qd(self) -> np.ndarray:
+        """Joint velocities [rad/s], control order."""
+        states = p.getJointStates(self.body, self.pb_joints, physicsClientId=self.client)
+        return np.array([s[1] for s in states])
+
+    def reset(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
+        """Teleport the joints to ``q`` [rad] with velocities ``qd`` [rad/s] (default 0)."""
+        qd = np.zeros(self.n) if qd is None else qd
+        for j, qi, qdi in zip(self.pb_joints, q, qd, strict=True):
+            p.resetJointState(self.body, j, float(qi), float(qdi), physicsClientId=self.client)
+
+    # --------------------------------------------------------------- commands
+    def velocity_mode(self) -> None:
+        """Joint motors in velocity control, holding still until commanded."""
+        p.setJointMotorControlArray(
+            self.body, self.pb_joints, p.VELOCITY_CONTROL,
+            targetVelocities=[0.0] * self.n, forces=list(self.limits.tau_max),
+            physicsClientId=self.client,
+        )
+
+    def set_velocity_command(self, qd: np.ndarray) -> None:
+        """Command joint velocities [rad/s], clipped to the limits, motor force <= tau_max."""
+        qd_max = np.asarray(self.limits.qd_max)
+        qd = np.clip(np.asarray(qd, dtype=float), -qd_max, qd_max)
+        p.setJointMotorControlArray(
+            self.body, self.pb_joints, p.VELOCITY_CONTROL,
+            targetVelocities=qd.tolist(), forces=list(self.limits.tau_max),
+            physicsClientId=self.client,
+        )
+
+    def set_position_command(self, q_ref: np.ndarray, qd_ref: np.ndarray,
+                             position_gain: float = 0.2, velocity_gain: float = 1.0) -> None:
+        """Track a joint reference with PyBullet's joint PD (position control) [rad, rad/s].
+
+        The gains are PyBullet's dimensionless ones; the motor force is limited to tau_max.
+        Called every physics step, this is the inner "PID" loop tracking an interpolated
+        reference (chan2011 Sec. V-A5).
+        """
+        p.setJointMotorControlArray(
+            self.body, self.pb_joints, p.POSITION_CONTROL,
+            targetPositions=np.asarray(q_ref, dtype=float).tolist(),
+            targetVelocities=np.asarray(qd_ref, dtype=float).tolist(),
+            positionGains=[position_gain] * self.n, velocityGains=[velocity_gain] * self.n,
+            forces=list(self.limits.tau_max), physicsClientId=self.client,
+        )
+
+    def torque_mode(self) -> None:
+        """Release the velocity motors so that :meth:`set_torque_command` acts alone."""
+        p.setJointMotorControlArray(
+            self.body, self.pb_joints, p.VELOCITY_CONTROL,
+            targetVelocities=[0.0] * self.n, forces=[0.0] * self.n,
+            physicsClientId=self.client,
+        )
+
+    def set_torque_command(self, tau: np.ndarray) -> None:
+        """Command joint torques [N m], clipped to +-tau_max (call torque_mode() first)."""
+        tau_max = np.asarray(self.limits.tau_max)
+        tau = np.clip(np.asarray(tau, dtype=float), -tau_max, tau_max)
+        p.setJointMotorControlArray(
+            self.body, self.pb_joints, p.TORQUE_CONTROL, forces=tau.tolist(),
+            physicsClientId=self.client,
+        )
+
+
+class Robot(JointSet):
     """A fixed-base robot in a :class:`World`.
 
     Args:
@@ -142,65 +231,6 @@ class Robot:
             raise UnknownChoiceError("link", link, self._pb_link)
         return self._pb_link[link]
 
-    def q(self) -> np.ndarray:
-        """Joint positions [rad], control order."""
-        states = p.getJointStates(self.body, self.pb_joints, physicsClientId=self.client)
-        return np.array([s[0] for s in states])
-
-    def qd(self) -> np.ndarray:
-        """Joint velocities [rad/s], control order."""
-        states = p.getJointStates(self.body, self.pb_joints, physicsClientId=self.client)
-        return np.array([s[1] for s in states])
-
-    def reset(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
-        """Teleport the joints to ``q`` [rad] with velocities ``qd`` [rad/s] (default 0)."""
-        qd = np.zeros(self.n) if qd is None else qd
-        for j, qi, qdi in zip(self.pb_joints, q, qd, strict=True):
-            p.resetJointState(self.body, j, float(qi), float(qdi), physicsClientId=self.client)
-
-    # --------------------------------------------------------------- commands
-    def velocity_mode(self) -> None:
-        """Joint motors in velocity control, holding still until commanded."""
-        p.setJointMotorControlArray(
-            self.body, self.pb_joints, p.VELOCITY_CONTROL,
-            targetVelocities=[0.0] * self.n, forces=list(self.limits.tau_max),
-            physicsClientId=self.client,
-        )
-
-    def set_velocity_command(self, qd: np.ndarray) -> None:
-        """Command joint velocities [rad/s], clipped to the limits, motor force <= tau_max."""
-        qd_max = np.asarray(self.limits.qd_max)
-        qd = np.clip(np.asarray(qd, dtype=float), -qd_max, qd_max)
-        p.setJointMotorControlArray(
-            self.body, self.pb_joints, p.VELOCITY_CONTROL,
-            targetVelocities=qd.tolist(), forces=list(self.limits.tau_max),
-            physicsClientId=self.client,
-        )
-
-    def set_position_command(self, q_ref: np.ndarray, qd_ref: np.ndarray,
-                             position_gain: float = 0.2, velocity_gain: float = 1.0) -> None:
-        """Track a joint reference with PyBullet's joint PD (position control) [rad, rad/s].
-
-        The gains are PyBullet's dimensionless ones; the motor force is limited to tau_max.
-        Called every physics step, this is the inner "PID" loop tracking an interpolated
-        reference (chan2011 Sec. V-A5).
-        """
-        p.setJointMotorControlArray(
-            self.body, self.pb_joints, p.POSITION_CONTROL,
-            targetPositions=np.asarray(q_ref, dtype=float).tolist(),
-            targetVelocities=np.asarray(qd_ref, dtype=float).tolist(),
-            positionGains=[position_gain] * self.n, velocityGains=[velocity_gain] * self.n,
-            forces=list(self.limits.tau_max), physicsClientId=self.client,
-        )
-
-    def torque_mode(self) -> None:
-        """Release the velocity motors so that :meth:`set_torque_command` acts alone."""
-        p.setJointMotorControlArray(
-            self.body, self.pb_joints, p.VELOCITY_CONTROL,
-            targetVelocities=[0.0] * self.n, forces=[0.0] * self.n,
-            physicsClientId=self.client,
-        )
-
     def gravity_torques(self, q: np.ndarray) -> np.ndarray:
         """g(q): joint torques [N m] that hold the robot still at ``q`` (pinocchio RNEA with
         zero velocity and acceleration, gravity of the world)."""
@@ -210,15 +240,6 @@ class Robot:
         g = pin.computeGeneralizedGravity(self.model, self.data, qp)
         self._pin_q_key = None  # the kinematics cache no longer matches data
         return np.asarray(g)[self._pin_q_idx]
-
-    def set_torque_command(self, tau: np.ndarray) -> None:
-        """Command joint torques [N m], clipped to +-tau_max (call torque_mode() first)."""
-        tau_max = np.asarray(self.limits.tau_max)
-        tau = np.clip(np.asarray(tau, dtype=float), -tau_max, tau_max)
-        p.setJointMotorControlArray(
-            self.body, self.pb_joints, p.TORQUE_CONTROL, forces=tau.tolist(),
-            physicsClientId=self.client,
-        )
 
     # ------------------------------------------------------------ kinematics
     def _pin_q(self, q: np.ndarray) -> np.ndarray:
@@ -306,6 +327,56 @@ class Robot:
         if not pts:
             return max_distance
         return float(min(pt[8] for pt in pts))
+
+
+class JointGroup(JointSet):
+    """A subset of a robot's joints, driven and logged on its own.
+
+    One URDF may carry two robots (pomares2011: the PA-10 and the mini-robot on its flange):
+    a :class:`Robot` gives the kinematics and dynamics of the whole chain, and one group per
+    robot gives each its own drive (velocity for one, torque for the other) and trace
+    columns. ``links`` are the PyBullet links the group moves: those whose nearest non-fixed
+    ancestor joint (or their own joint) belongs to the group, plus the base link for the
+    group that owns the base.
+
+    Args:
+        robot: the whole chain.
+        name: the group's name (drives, observations and columns use it).
+        joints: its joints, a subset of ``robot.joint_names`` in control order.
+        column_prefix: prefix of its trace columns (e.g. ``"mini_"``).
+        owns_base: the base link belongs to this group.
+    """
+
+    def __init__(self, robot: Robot, name: str, joints: tuple[str, ...], column_prefix: str,
+                 owns_base: bool = False) -> None:
+        unknown = [j for j in joints if j not in robot.joint_names]
+        if unknown or not joints:
+            raise UnknownChoiceError("joint", unknown[0] if unknown else "", robot.joint_names)
+        self.robot, self.name, self.column_prefix = robot, name, column_prefix
+        self.world, self.body, self.client = robot.world, robot.body, robot.client
+        self.joint_names = tuple(joints)
+        self.idx = np.array([robot.joint_names.index(j) for j in joints])
+        self.pb_joints = [robot.pb_joints[i] for i in self.idx]
+        self.n = len(joints)
+        self.limits = JointLimits(*(tuple(float(v) for v in np.asarray(getattr(
+            robot.limits, f))[self.idx]) for f in ("q_min", "q_max", "qd_max", "tau_max")))
+        mine = set(self.pb_joints)
+        controlled = set(robot.pb_joints)
+        self.links: list[int] = [-1] if owns_base else []
+        for link in range(p.getNumJoints(robot.body, physicsClientId=robot.client)):
+            j = link
+            while j >= 0 and j not in controlled:  # walk up to the nearest controlled joint
+                j = p.getJointInfo(robot.body, j, physicsClientId=robot.client)[16]
+            if (j >= 0 and j in mine) or (j < 0 and owns_base):
+                self.links.append(link)
+
+    def gravity_torques(self, q: np.ndarray | None = None) -> np.ndarray:
+        """The group's part of g(q) [N m], at the whole chain's current configuration
+        (``q`` of the group, if given, replaces the group's joints)."""
+        q_all = self.robot.q()
+        if q is not None:
+            q_all[self.idx] = q
+        return self.robot.gravity_torques(q_all)[self.idx]
 
 
 def solve_ik(robot: Robot, frame: str, T_world_target: np.ndarray, q_init: np.ndarray,

@@ -42,7 +42,7 @@ from repro.sensors.camera import (
     move_dot_target,
     spawn_dot_target,
 )
-from repro.sim.robot import URDF_LOAD_FLAGS, JointLimits, Robot
+from repro.sim.robot import URDF_LOAD_FLAGS, JointLimits, JointSet, Robot
 from repro.sim.world import World, WorldConfig, pose_to_pb
 
 __all__ = ["CONVENTIONS", "DISTANCE_CAP", "Part", "Scene", "SceneBody", "pose_json"]
@@ -379,19 +379,25 @@ class Scene:
         return [b.robot for b in self.bodies.values() if b.robot is not None]
 
     # ----------------------------------------------------------- ground truth
-    def distances(self, robot: Robot, max_distance: float = DISTANCE_CAP) -> dict[str, float]:
+    def distances(self, robot: JointSet, max_distance: float = DISTANCE_CAP
+                  ) -> dict[str, float]:
         """Ground-truth minimum distance [m] from ``robot`` to every other body with a
         collision shape (PyBullet closest points between collision geometries; < 0 is
         penetration; ``max_distance`` when farther). A compound body: the minimum over its
-        parts."""
+        parts. ``robot`` may be a :class:`~repro.sim.robot.JointGroup`: then only the links
+        it moves count, and the rest of its own body is skipped."""
+        full = getattr(robot, "robot", robot)  # a JointGroup's whole chain
+        links = getattr(robot, "links", None)
         out = {}
         for body in self.bodies.values():
-            if not body.collision or body.robot is robot:
+            if not body.collision or body.robot is full:
                 continue
             d = max_distance
             for bid in body.ids:
-                pts = p.getClosestPoints(robot.body, bid, max_distance,
+                pts = p.getClosestPoints(full.body, bid, max_distance,
                                          physicsClientId=self.physics.client)
+                if links is not None:
+                    pts = [pt for pt in pts if pt[3] in links]
                 if pts:
                     d = min(d, min(pt[8] for pt in pts))
             out[body.name] = float(d)
