@@ -241,6 +241,14 @@ class Robot(JointSet):
         self._pin_q_key = None  # the kinematics cache no longer matches data
         return np.asarray(g)[self._pin_q_idx]
 
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """M(q) [kg m^2] (n, n), control order (pinocchio CRBA, symmetrised)."""
+        qp = self._pin_q(np.asarray(q, dtype=float))
+        M = pin.crba(self.model, self.data, qp)
+        M = np.triu(M) + np.triu(M, 1).T
+        self._pin_q_key = None  # the kinematics cache no longer matches data
+        return np.asarray(M)[np.ix_(self._pin_q_idx, self._pin_q_idx)]
+
     # ------------------------------------------------------------ kinematics
     def _pin_q(self, q: np.ndarray) -> np.ndarray:
         qp = np.zeros(self.model.nq)

@@ -1,0 +1,34 @@
+"""pomares2011 trace columns: declared once, read by the run, the figures and the claims.
+
+The runner adds its own: ``pa10_q{i}``/``pa10_qd{i}``/``pa10_u{i}`` (the PA-10: joint
+velocity commands [rad/s]), ``mini_q{i}``/``mini_qd{i}``/``mini_u{i}`` (the mini-robot:
+joint torques [N m]), the camera's points ``s{i}_*`` with their audit, ``*_dist_*``.
+"""
+
+from __future__ import annotations
+
+from repro.runs.columns import Columns
+
+N_POINTS = 4  # pomares2011 Sec. 7: four points
+__all__ = ["N_POINTS", "declare_columns"]
+
+
+def declare_columns() -> Columns:
+    """The controller's columns."""
+    cols = Columns()
+    cols.add("su{i}_u", "px", "RVC feature {i} (u): projection of P_u through the Reference "
+             "Virtual Camera, object pose from VVS (eqs. 19-21); held between frames",
+             n=N_POINTS)
+    cols.add("su{i}_v", "px", "RVC feature {i} (v)", n=N_POINTS)
+    cols.add("e_u_px", "px", "RMS distance of the RVC features to s_u*")
+    cols.add("e_s_px", "px", "RMS distance of the camera's detected points to s*")
+    cols.add("V", "J", "Lyapunov function (10): 1/2 qd^T M qd + 1/2 e_s^T K_P e_s of the "
+             "mini-robot")
+    cols.add("e2", "-", "secondary task (17), alpha (1 - dist/dmin) when dist < dmin, else 0")
+    cols.add("secondary_active", "bool", "the human is within dmin: primary task reduced")
+    cols.add("vvs_iter", "-", "iterations of the VVS pose estimate of the last frame")
+    cols.add("vvs_residual_px", "px", "RMS reprojection residual of the VVS pose")
+    cols.add("vvs_converged", "bool", "the VVS stopped on its tolerance, not its budget")
+    cols.add("vvs_pos_err_m", "m", "audit: distance between the VVS and the true object "
+             "position in the camera frame", audit=True)
+    return cols
