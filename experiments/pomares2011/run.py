@@ -75,6 +75,8 @@ class Pomares2011Controller:
         """A new frame: the object pose by VVS, then the RVC features and law (18)."""
         if self.T_mc_obj is None:  # first frame: a PnP pose starts the VVS
             self.T_mc_obj = pose_from_points(sc.POINTS_P, uv, sc.INTRINSICS.K())
+            if self.T_mc_obj is None:
+                return  # no pose yet: the arm waits (qd_arm stays 0)
         res = vvs_pose(sc.POINTS_P, uv, sc.INTRINSICS, self.T_mc_obj)
         self.T_mc_obj = res.T_cam_obj
         T_world_rvc = self.chain.frame_pose("pa10_flange", q) @ sc.T_FLANGE_RVC
@@ -108,7 +110,10 @@ class Pomares2011Controller:
         self.lost = False
         if obs.step % self.config.camera_period == 0:
             self._rvc(q, f.uv)
-        assert self.T_mc_obj is not None
+        if self.T_mc_obj is None:
+            return StepResult({"arm": np.zeros(self.arm.n), "mini": self.mini.gravity_torques()},
+                              {}, [("no_pose", "PnP found no object pose: waiting")],
+                              fallback=True)
         P_c = sc.POINTS_P @ self.T_mc_obj[:3, :3].T + self.T_mc_obj[:3, 3]
         L_px = pixel_interaction_matrix(f.uv, P_c[:, 2])  # depths from the VVS pose
         if self.hybrid is None:
