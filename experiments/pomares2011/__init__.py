@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from experiments.pomares2011 import config as _c
 from experiments.pomares2011.run import check_config, run
-from repro.runs.registry import Experiment, Paper
+from repro.runs.registry import Experiment, Paper, lazy
 
 EXPERIMENTS = Paper(
     key="pomares2011",
@@ -19,4 +19,5 @@ EXPERIMENTS = Paper(
                    "direct hybrid VS for the mini-robot (Figs. 5-7)", _c.Exp1Config, run,
                    check=check_config),
     ),
+    figures=lazy("experiments.pomares2011.figures", "make_figures"),
 )
