@@ -323,8 +323,9 @@ def test_joint_groups_of_one_urdf_have_their_own_drives_columns_and_distances(
     chain = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS)
     q0 = np.array([0.0, 0.3, 0.9, 0.0, 0.6, 0.0, 0.0, -0.3, 0.4])
     chain.reset(q0)
-    arm = JointGroup(chain, "arm", PA10_JOINTS, "pa10_", owns_base=True)
-    mini = JointGroup(chain, "mini", MINI_JOINTS, "mini_")
+    arm = scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True)
+    mini = scene.add_joint_group("pa10", "mini", MINI_JOINTS, "mini_")
+    assert isinstance(mini, JointGroup)
     assert set(arm.links).isdisjoint(mini.links) and -1 in arm.links and mini.links
     T_cam = chain.frame_pose("mini_camera_optical", q0)
     scene.add_dot_target("target", DotTarget.square(0.03, 0.005, (0.1, 0.1)),
@@ -356,3 +357,8 @@ def test_joint_groups_of_one_urdf_have_their_own_drives_columns_and_distances(
     assert new[::5].all() and not new[1::5].any()
     held = df["s1_u"].to_numpy()
     assert np.all(held[1:5] == held[0]) and held[5] != held[0]  # held between frames
+    body = json.loads((tmp_path / "scene.json").read_text())["bodies"][0]
+    assert body["q_columns"] == [f"pa10_q{i}" for i in range(1, 7)] + ["mini_q1", "mini_q2",
+                                                                          "mini_q3"]
+    assert [g["name"] for g in body["groups"]] == ["arm", "mini"]
+    assert set(body["groups"][1]["links"]) == set(mini.links)

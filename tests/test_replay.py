@@ -218,8 +218,9 @@ class Replay:
                     p.resetBasePositionAndOrientation(bid, pos, quat, physicsClientId=c)
 
     # ------------------------------------------------------------ ground truth
-    def distances(self, robot: str) -> dict[str, float]:
-        """Minimum distance [m] from ``robot`` to every other collision body (capped)."""
+    def distances(self, robot: str, links: list[int] | None = None) -> dict[str, float]:
+        """Minimum distance [m] from ``robot`` (only its ``links``, if given: a joint group)
+        to every other collision body (capped)."""
         out = {}
         rid = self.ids[robot][0]
         for name, ids in self.ids.items():
@@ -228,6 +229,8 @@ class Replay:
             d = self.cap
             for bid in ids:
                 pts = p.getClosestPoints(rid, bid, self.cap, physicsClientId=self.client)
+                if links is not None:
+                    pts = [pt for pt in pts if pt[3] in links]
                 if pts:
                     d = min(d, min(pt[8] for pt in pts))
             out[name] = float(d)
@@ -421,9 +424,12 @@ def _audit_column(decl: dict[str, dict[str, Any]], col: str, check: str, res: Re
 
 def _check_distances(replay: Replay, robots: list[dict[str, Any]], row: pd.Series, k: int,
                      decl: dict[str, dict[str, Any]], res: Result) -> None:
-    for b in robots:
-        prefix = b["column_prefix"]
-        dist = replay.distances(b["name"])
+    # a robot body, or each of its joint groups (own prefix, own links)
+    parts = [(g["column_prefix"], g["links"], b["name"]) for b in robots
+             for g in b.get("groups", [])]
+    parts += [(b["column_prefix"], None, b["name"]) for b in robots if not b.get("groups")]
+    for prefix, links, name in parts:
+        dist = replay.distances(name, links)
         for body, d in dist.items():
             col = f"{prefix}dist_{body}"
             if not _audit_column(decl, col, "distances", res, row):

@@ -135,8 +135,8 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
     scene = Scene(WorldConfig(physics_dt=dt, control_dt=dt),
                   render=config.camera_mode == "render", run_dir=out_dir)
     chain = sc.build_scene(scene, sc.Q_START)
-    arm = JointGroup(chain, "arm", PA10_JOINTS, "pa10_", owns_base=True)
-    mini = JointGroup(chain, "mini", MINI_JOINTS, "mini_")
+    arm = scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True)
+    mini = scene.add_joint_group("pa10", "mini", MINI_JOINTS, "mini_")
     scene.add_mount("camera", "pa10", "mini_camera_optical", np.eye(4),
                     "the mini-robot camera (x right, y down, z forward)")
     scene.add_mount("rvc", "pa10", "pa10_flange", sc.T_FLANGE_RVC,

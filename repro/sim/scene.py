@@ -42,7 +42,7 @@ from repro.sensors.camera import (
     move_dot_target,
     spawn_dot_target,
 )
-from repro.sim.robot import URDF_LOAD_FLAGS, JointLimits, JointSet, Robot
+from repro.sim.robot import URDF_LOAD_FLAGS, JointGroup, JointLimits, JointSet, Robot
 from repro.sim.world import World, WorldConfig, pose_to_pb
 
 __all__ = ["CONVENTIONS", "DISTANCE_CAP", "Part", "Scene", "SceneBody", "pose_json"]
@@ -252,6 +252,28 @@ class Scene:
                                   "to tau_max",
             })
         return robot
+
+    def add_joint_group(self, body: str, name: str, joints: tuple[str, ...],
+                        column_prefix: str, owns_base: bool = False) -> JointGroup:
+        """A subset of a URDF body's joints driven and logged on its own (e.g. pomares2011's
+        PA-10 and mini-robot in one URDF); recorded in scene.json: the body's ``q_columns``
+        become the groups' columns, and each group lists its joints, links and prefix."""
+        robot = self[body].robot
+        if robot is None:
+            raise ConfigError(f"body {body!r} is not a robot")
+        group = JointGroup(robot, name, joints, column_prefix, owns_base)
+        info = self[body].info
+        groups = info.setdefault("groups", [])
+        if any(g["name"] == name for g in groups):
+            raise ConfigError(f"body {body!r} already has a joint group named {name!r}")
+        groups.append({"name": name, "column_prefix": column_prefix, "joints": list(joints),
+                       "q_columns": [f"{column_prefix}q{i + 1}" for i in range(len(joints))],
+                       "links": group.links, "links_note": "PyBullet link indices this group "
+                       "moves (-1 = base); its <prefix>dist_* columns are over these links"})
+        by_joint = {j: f"{g['column_prefix']}q{g['joints'].index(j) + 1}"
+                    for g in groups for j in g["joints"]}
+        info["q_columns"] = [by_joint.get(j, "") for j in info["joints"]]
+        return group
 
     def _copy_urdf(self, src: Path, name: str) -> Path:
         """Copy ``src`` into the run folder; copy its meshes under ``meshes/<name>/`` and
