@@ -581,7 +581,8 @@ def run_episode(ep: Episode, out_dir: Path, *, experiment: str, paper: str, conf
                             "T_frame_camera",
                 "T_frame_camera": pose_json(c.T_frame_camera),
                 "target": c.target, "feature_prefix": c.prefix, "mode": c.camera.mode,
-                "audit_tolerance_px": c.tol_px, **_camera_json(c.camera)} for c in ep.cameras}
+                "audit_tolerance_px": c.tol_px, "period_control_steps": c.period,
+                **_camera_json(c.camera)} for c in ep.cameras}
             desc["actuation"] = {name: {"mode": d.mode, "command_unit": d.unit}
                                  for name, d in ep.drives.items()}
             desc["columns_file"] = COLUMNS_FILE
