@@ -327,15 +327,23 @@ def _cmd_run(args: argparse.Namespace) -> int:
         out_dir = default_out_dir(exp, args.results, config)
     out_dir.mkdir(parents=True, exist_ok=True)
     print(f"running {exp.id} -> {out_dir}", file=sys.stderr)
+    result = _run_interruptible(exp, config, out_dir)
+    if isinstance(result, int):
+        return result
+    print(result)
+    return 0
+
+
+def _run_interruptible(exp: Experiment, config: Any, out_dir: Path) -> Path | int:
+    """Run ``exp`` with SIGINT/SIGTERM closing it as interrupted; the run's folder, or the
+    exit code of an interrupted run (one line printed)."""
     fired: list[int] = []
     started = time.time()
     try:
         with _stop_on_signals(fired):
-            result = registry.run_experiment(exp, config, out_dir)
+            return registry.run_experiment(exp, config, out_dir)
     except KeyboardInterrupt:
         return _interrupted(fired, out_dir, started)
-    print(result)
-    return 0
 
 
 def _fix_dead_runs(papers: Mapping[str, Paper], results_dir: Path) -> list[tuple[Path, dict]]:
@@ -404,13 +412,9 @@ def _cmd_results(args: argparse.Namespace) -> int:
             bar.set_postfix_str(exp.id)
             out_dir = registry.experiment_dir(args.results, exp)
             out_dir.mkdir(parents=True, exist_ok=True)
-            fired: list[int] = []
-            started = time.time()
-            try:
-                with _stop_on_signals(fired):
-                    path = registry.run_experiment(exp, config, out_dir)
-            except KeyboardInterrupt:
-                return _interrupted(fired, out_dir, started)
+            path = _run_interruptible(exp, config, out_dir)
+            if isinstance(path, int):
+                return path
             ran.append((exp, reason, path))
             bar.update(1)
 

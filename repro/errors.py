@@ -29,6 +29,12 @@ class UnknownChoiceError(ConfigError):
         )
 
 
+class NonFiniteInputError(ReproError, ValueError):
+    """A control or vision input (features, error, Jacobian, gain, limit, pose) holds NaN or
+    inf. Raised instead of letting a NaN reach a joint command; a lost feature's NaN should be
+    handled before the control law (select the found features, or stop)."""
+
+
 class SolverError(ReproError):
     """A numerical solver failed in a way the caller must handle."""
 

@@ -20,6 +20,7 @@ import pinocchio as pin
 import pybullet as p
 import pytest
 
+from repro.assets.urdf_primitives import mass_properties
 from repro.errors import ConfigError
 from repro.sim.drives import TorqueDrive
 from repro.sim.pa10 import (
@@ -382,12 +383,12 @@ def test_mass_properties(robot: Robot) -> None:
     for body_link, joint in (("pa10_link1", "pa10_joint1"), ("pa10_link2", "pa10_joint2"),
                              ("pa10_link4", "pa10_joint4"), ("mini_link1", "mini_joint1"),
                              ("mini_link2", "mini_joint2")):
-        com, tensor = make_urdf.mass_properties(bodies[body_link])
+        com, tensor = mass_properties(bodies[body_link])
         Y = robot.model.inertias[robot.model.getJointId(joint)]
         assert Y.mass == pytest.approx(masses[body_link], abs=1e-12), body_link
         np.testing.assert_allclose(Y.lever, com, atol=1e-11, err_msg=body_link)
         np.testing.assert_allclose(Y.inertia, tensor, atol=1e-10, err_msg=body_link)
-    assert abs(make_urdf.mass_properties(bodies["mini_link1"])[1][0, 2]) > 1e-5  # rotated
+    assert abs(mass_properties(bodies["mini_link1"])[1][0, 2]) > 1e-5  # rotated
 
 
 def test_gravity_compensation_holds_and_zero_torque_falls() -> None:

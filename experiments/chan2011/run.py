@@ -228,8 +228,5 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
 def run(config: Chan2011Config, out_dir: Path, experiment: str | None = None) -> Path:
     """Run one chan2011 experiment and write its run files (see repro.sim.episode)."""
     check_config(config)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    ep = build(config, out_dir)
-    return run_episode(ep, out_dir, experiment=experiment or out_dir.name.split("__")[0],
-                       paper="chan2011", config=config, seed=config.seed)
+    ep = build(config, Path(out_dir))
+    return run_episode(ep, Path(out_dir), paper="chan2011", config=config, experiment=experiment)

@@ -20,6 +20,10 @@ def declare_columns() -> Columns:
              "Virtual Camera, object pose from VVS (eqs. 19-21); held between frames",
              n=N_POINTS)
     cols.add("su{i}_v", "px", "RVC feature {i} (v)", n=N_POINTS)
+    cols.add("su{i}_u_true", "px", "audit: RVC feature {i} (u) from the true object pose",
+             n=N_POINTS, audit=True)
+    cols.add("su{i}_v_true", "px", "audit: RVC feature {i} (v) from the true object pose",
+             n=N_POINTS, audit=True)
     cols.add("e_u_px", "px", "RMS distance of the RVC features to s_u*")
     cols.add("e_s_px", "px", "RMS distance of the camera's detected points to s*")
     cols.add("V", "J", "Lyapunov function (10): 1/2 qd^T M qd + 1/2 e_s^T K_P e_s of the "

@@ -88,6 +88,8 @@ class Pomares2011Controller:
                                          self.config.rvc_gain, sc.T_FLANGE_RVC, eJ_e,
                                          np.asarray(self.arm.limits.qd_max), "scale")  # (18)
         T_true = inv_T(T_world_mc) @ sc.OBJECT.T_world  # audit: the true object pose
+        true_u = rvc_features(sc.RVC_INTRINSICS, inv_T(T_world_rvc) @ sc.OBJECT.T_world,
+                              sc.POINTS_U).uv  # audit: s_u with the true object pose
         cols: dict[str, float | int | bool] = {
             "vvs_iter": res.iterations, "vvs_residual_px": res.residual_px,
             "vvs_converged": res.converged,
@@ -95,6 +97,7 @@ class Pomares2011Controller:
             "e_u_px": float(np.sqrt(np.mean(np.sum((feats.uv - sc.S_U_STAR) ** 2, axis=1))))}
         for i in range(N):
             cols[f"su{i + 1}_u"], cols[f"su{i + 1}_v"] = feats.uv[i]
+            cols[f"su{i + 1}_u_true"], cols[f"su{i + 1}_v_true"] = true_u[i]
         self.rvc_cols = cols
 
     def __call__(self, obs: Observation) -> StepResult:
@@ -156,8 +159,5 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
 def run(config: Pomares2011Config, out_dir: Path, experiment: str | None = None) -> Path:
     """Run one pomares2011 experiment and write its run files (see repro.sim.episode)."""
     check_config(config)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    ep, _ = build(config, out_dir)
-    return run_episode(ep, out_dir, experiment=experiment or out_dir.name.split("__")[0],
-                       paper="pomares2011", config=config, seed=config.seed)
+    ep = build(config, Path(out_dir))[0]
+    return run_episode(ep, Path(out_dir), paper="pomares2011", config=config, experiment=experiment)

@@ -234,8 +234,5 @@ def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024C
 def run(config: Thomas2024Config, out_dir: Path, experiment: str | None = None) -> Path:
     """Run one thomas2024 case and write its run files (see repro.sim.episode)."""
     check_config(config)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    ep, _ = build(config, out_dir)
-    return run_episode(ep, out_dir, experiment=experiment or out_dir.name.split("__")[0],
-                       paper="thomas2024", config=config, seed=config.seed)
+    ep = build(config, Path(out_dir))[0]
+    return run_episode(ep, Path(out_dir), paper="thomas2024", config=config, experiment=experiment)

@@ -557,16 +557,20 @@ class _Progress:
             self.bar.close()
 
 
-def run_episode(ep: Episode, out_dir: Path, *, experiment: str, paper: str, config: Any,
-                seed: int, scene_extra: Mapping[str, Any] | None = None) -> Path:
+def run_episode(ep: Episode, out_dir: Path, *, paper: str, config: Any,
+                experiment: str | None = None, seed: int | None = None,
+                scene_extra: Mapping[str, Any] | None = None) -> Path:
     """Run ``ep`` and write the run files into ``out_dir``; the scene is closed at the end.
 
-    A crash or an interrupt still closes the run (status ``crashed`` / ``interrupted``) with
-    the rows recorded so far.
+    ``experiment`` defaults to the folder's name without its ``__<hash>`` suffix, ``seed``
+    to ``config.seed``. A crash or an interrupt still closes the run (status ``crashed`` /
+    ``interrupted``) with the rows recorded so far.
     """
     import shutil
 
     out_dir = Path(out_dir)
+    experiment = experiment or out_dir.name.split("__")[0]
+    seed = int(config.seed) if seed is None else seed
     shutil.rmtree(out_dir / "frames", ignore_errors=True)  # no stale snapshots
     (out_dir / "video.gif").unlink(missing_ok=True)
     if ep.duration <= 0:

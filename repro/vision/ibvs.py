@@ -34,21 +34,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from repro.errors import ReproError, UnknownChoiceError
+from repro.errors import NonFiniteInputError, UnknownChoiceError
 
 #: Ways :func:`ibvs_joint_velocity` and :func:`saturate` bound a joint velocity vector.
 SATURATIONS = ("clip", "scale")
 
 
-class NonFiniteInputError(ReproError, ValueError):
-    """An IBVS input (features, error, Jacobian, gain, limit) holds NaN or inf.
-
-    Raised instead of letting a NaN reach a joint command. A lost feature's NaN should be
-    handled before the control law (select the found features, or stop).
-    """
-
-
-def _finite(name: str, a: np.ndarray) -> np.ndarray:
+def require_finite(name: str, a: np.ndarray) -> np.ndarray:
     """``a`` as a float array; raises :class:`NonFiniteInputError` naming the bad entries."""
     a = np.asarray(a, dtype=float)
     if not np.all(np.isfinite(a)):
@@ -63,7 +55,7 @@ def _matrix(name: str, a: np.ndarray, rows: int | None, cols: int | None) -> np.
             cols is not None and a.shape[1] != cols):
         want = f"({'k' if rows is None else rows}, {'n' if cols is None else cols})"
         raise ValueError(f"{name} must have shape {want}, got {a.shape}")
-    return _finite(name, a)
+    return require_finite(name, a)
 
 
 def _gain(gain: float) -> float:
@@ -79,7 +71,7 @@ def _error(e: np.ndarray, k: int) -> np.ndarray:
     e = np.asarray(e, dtype=float).reshape(-1)
     if e.shape[0] != k:
         raise ValueError(f"error e must have {k} entries (rows of the Jacobian), got {e.shape[0]}")
-    return _finite("error e", e)
+    return require_finite("error e", e)
 
 
 def feature_jacobian(L_s: np.ndarray, cV_e: np.ndarray, eJ_e: np.ndarray) -> np.ndarray:
@@ -164,8 +156,8 @@ def saturate(qd: np.ndarray, qd_max: float | np.ndarray, mode: str = "clip") -> 
     """
     if mode not in SATURATIONS:
         raise UnknownChoiceError("saturation", mode, SATURATIONS)
-    qd = _finite("qd", np.asarray(qd, dtype=float).reshape(-1))
-    lim = _finite("qd_max", np.broadcast_to(np.asarray(qd_max, dtype=float), qd.shape))
+    qd = require_finite("qd", np.asarray(qd, dtype=float).reshape(-1))
+    lim = require_finite("qd_max", np.broadcast_to(np.asarray(qd_max, dtype=float), qd.shape))
     if np.any(lim <= 0.0):
         raise ValueError(f"qd_max must be > 0, got {lim.tolist()}")
     if mode == "clip":

@@ -54,7 +54,7 @@ import numpy as np
 
 from repro.sensors.camera import Intrinsics
 from repro.vision.features import interaction_matrix_points, skew
-from repro.vision.ibvs import NonFiniteInputError
+from repro.vision.ibvs import require_finite
 
 #: ViSP's defaults (pomares2011_facts.md): gain, stop on the change of ||e||^2 [-], steps.
 VVS_GAIN = 0.9
@@ -120,14 +120,6 @@ def se3_exp(V: np.ndarray) -> np.ndarray:
     T[:3, :3] = np.eye(3) + a * W + b * W2
     T[:3, 3] = (np.eye(3) + b * W + c * W2) @ v
     return T
-
-
-def _finite(name: str, a: np.ndarray) -> np.ndarray:
-    a = np.asarray(a, dtype=float)
-    if not np.all(np.isfinite(a)):
-        bad = np.argwhere(~np.isfinite(a)).tolist()
-        raise NonFiniteInputError(f"{name} must be finite; non-finite entries at {bad}")
-    return a
 
 
 def project_normalized(points_obj: np.ndarray,
@@ -214,19 +206,19 @@ def vvs_pose(points_obj: np.ndarray, uv: np.ndarray, intrinsics: Intrinsics,
             feature: pass the found points only), pose, intrinsic or parameter.
         ValueError: malformed shapes, fewer than 3 points, or a parameter out of range.
     """
-    P = _finite("points_obj", points_obj)
+    P = require_finite("points_obj", points_obj)
     uv = np.asarray(uv, dtype=float)
     if P.ndim != 2 or P.shape[1] != 3 or uv.shape != (P.shape[0], 2):
         raise ValueError(f"need points_obj (N, 3) and uv (N, 2), got {P.shape} and {uv.shape}")
     if P.shape[0] < 3:
         raise ValueError(f"VVS needs at least 3 points (6 equations), got {P.shape[0]}")
-    uv = _finite("uv", uv)
-    T = _finite("T_init", T_init)
+    uv = require_finite("uv", uv)
+    T = require_finite("T_init", T_init)
     if T.shape != (4, 4):
         raise ValueError(f"T_init must be 4x4, got shape {T.shape}")
-    _finite("intrinsics K", intrinsics.K())
-    gain = float(_finite("gain", np.asarray(gain)))
-    eps = float(_finite("eps", np.asarray(eps)))
+    require_finite("intrinsics K", intrinsics.K())
+    gain = float(require_finite("gain", np.asarray(gain)))
+    eps = float(require_finite("eps", np.asarray(eps)))
     if not 0.0 < gain < 2.0:
         raise ValueError(f"gain lambda must be in (0, 2), got {gain}")
     if eps <= 0.0:

@@ -20,8 +20,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from repro.assets.urdf_primitives import (
+    Body,
+    Shape,
+    add_joint,
+    add_link,
+    rpy_of,
+)
 from repro.sim.pa10 import (
     ALL_JOINTS,
     ALL_LIMITS,
@@ -34,50 +40,6 @@ from repro.sim.pa10 import (
 )
 
 URDF_PATH = Path(__file__).resolve().with_name("pa10_mini.urdf")
-
-
-@dataclass(frozen=True)
-class Shape:
-    """A primitive of a link, axis-aligned with the link frame.
-
-    Attributes:
-        kind: "box" or "cylinder".
-        size: box full sizes (x, y, z) [m]; cylinder (radius, length) [m].
-        xyz: centre in the link frame [m].
-        axis: cylinder axis, "z" or "y" of the link frame (boxes: "z").
-    """
-
-    kind: str
-    size: tuple[float, ...]
-    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    axis: str = "z"
-
-    def volume(self) -> float:
-        """[m^3]"""
-        if self.kind == "box":
-            return float(np.prod(self.size))
-        r, length = self.size
-        return float(np.pi * r**2 * length)
-
-    def inertia(self, mass: float) -> np.ndarray:
-        """3x3 inertia [kg m^2] of a solid body of ``mass`` [kg], about its centre, link axes."""
-        if self.kind == "box":
-            x, y, z = self.size
-            return mass / 12.0 * np.diag([y**2 + z**2, x**2 + z**2, x**2 + y**2])
-        r, length = self.size
-        radial = mass * (3.0 * r**2 + length**2) / 12.0
-        axial = mass * r**2 / 2.0
-        return np.diag([radial, axial, radial] if self.axis == "y" else [radial, radial, axial])
-
-
-@dataclass(frozen=True)
-class Body:
-    """A link: a mass [kg] spread uniformly over its shapes, and a colour (RGBA)."""
-
-    name: str
-    mass: float
-    shapes: tuple[Shape, ...]
-    rgba: tuple[float, float, float, float]
 
 
 @dataclass(frozen=True)
@@ -266,108 +228,17 @@ def joints() -> tuple[Joint, ...]:
     return _pa10_joints() + _hand_joints() + _mini_joints()
 
 
-def _f(v: float) -> str:
-    v = round(float(v), 12) + 0.0  # + 0.0: no "-0"
-    return f"{v:.12g}"
-
-
-def _v(vs: tuple[float, ...] | np.ndarray) -> str:
-    return " ".join(_f(v) for v in vs)
-
-
-def _rpy(R: tuple[tuple[float, ...], ...] | np.ndarray) -> tuple[float, float, float]:
-    """URDF rpy [rad] of a rotation matrix (entries within 1e-12 of 0 snapped to 0)."""
-    M = np.array(R, dtype=float)
-    M[np.abs(M) < 1e-12] = 0.0
-    r, p, y = Rotation.from_matrix(M).as_euler("xyz")
-    return float(r), float(p), float(y)
-
-
-def mass_properties(body: Body) -> tuple[np.ndarray, np.ndarray]:
-    """Centre of mass [m] and inertia about it [kg m^2], link axes."""
-    vols = np.array([s.volume() for s in body.shapes])
-    masses = body.mass * vols / vols.sum()
-    centres = np.array([s.xyz for s in body.shapes])
-    com = masses @ centres / body.mass
-    inertia = np.zeros((3, 3))
-    for s, m, c in zip(body.shapes, masses, centres, strict=True):
-        d = c - com
-        inertia += s.inertia(m) + m * (d @ d * np.eye(3) - np.outer(d, d))
-    return com, inertia
-
-
-def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(moments [kg m^2], rotation R_link_inertial) with ``inertia = R diag(moments) R^T``.
-
-    Identity when the tensor is already diagonal; otherwise the eigenvectors, each signed so
-    that its largest component is positive, the last flipped if needed to make R proper.
-    """
-    off = inertia - np.diag(np.diag(inertia))
-    if np.abs(off).max() <= 1e-12 * np.abs(inertia).max():
-        return np.diag(inertia).copy(), np.eye(3)
-    moments, R = np.linalg.eigh(inertia)
-    for k in range(3):
-        if R[np.argmax(np.abs(R[:, k])), k] < 0:
-            R[:, k] *= -1.0
-    if np.linalg.det(R) < 0:
-        R[:, 2] *= -1.0
-    return moments, R
-
-
-def _geometry(parent: ET.Element, s: Shape) -> None:
-    rpy = (np.pi / 2, 0.0, 0.0) if s.axis == "y" else (0.0, 0.0, 0.0)
-    ET.SubElement(parent, "origin", xyz=_v(s.xyz), rpy=_v(rpy))
-    geom = ET.SubElement(parent, "geometry")
-    if s.kind == "box":
-        ET.SubElement(geom, "box", size=_v(s.size))
-    else:
-        ET.SubElement(geom, "cylinder", radius=_f(s.size[0]), length=_f(s.size[1]))
-
-
-def _link(robot: ET.Element, body: Body | None, name: str) -> None:
-    link = ET.SubElement(robot, "link", name=name)
-    inertial = ET.SubElement(link, "inertial")
-    if body is None:  # a frame: no mass
-        ET.SubElement(inertial, "origin", xyz="0 0 0", rpy="0 0 0")
-        ET.SubElement(inertial, "mass", value="0")
-        ET.SubElement(inertial, "inertia", ixx="0", ixy="0", ixz="0", iyy="0", iyz="0",
-                      izz="0")
-        return
-    com, inertia = mass_properties(body)
-    moments, R = principal_axes(inertia)
-    ET.SubElement(inertial, "origin", xyz=_v(com), rpy=_v(_rpy(R)))
-    ET.SubElement(inertial, "mass", value=_f(body.mass))
-    ET.SubElement(inertial, "inertia", ixx=_f(moments[0]), ixy="0", ixz="0",
-                  iyy=_f(moments[1]), iyz="0", izz=_f(moments[2]))
-    for k, s in enumerate(body.shapes):
-        vis = ET.SubElement(link, "visual")
-        _geometry(vis, s)
-        mat = ET.SubElement(vis, "material", name=f"{body.name}_color{k}")
-        ET.SubElement(mat, "color", rgba=_v(body.rgba))
-    for s in body.shapes:
-        _geometry(ET.SubElement(link, "collision"), s)
-
-
 def build_urdf() -> str:
     """The URDF text (deterministic)."""
     robot = ET.Element("robot", name="pa10_mini")
     robot.append(ET.Comment(
         " Generated by make_urdf.py (do not edit); README.md gives the source of every number. "))
     bodies = {b.name: b for b in BODIES}
-    _link(robot, bodies["pa10_link0"], "pa10_link0")
+    add_link(robot, bodies["pa10_link0"], "pa10_link0")
     for j in joints():
-        _link(robot, bodies.get(j.child), j.child)
-        kind = "fixed" if j.axis is None else "revolute"
-        joint = ET.SubElement(robot, "joint", name=j.name, type=kind)
-        ET.SubElement(joint, "parent", link=j.parent)
-        ET.SubElement(joint, "child", link=j.child)
-        ET.SubElement(joint, "origin", xyz=_v(j.xyz), rpy=_v(_rpy(j.R)))
-        if j.axis is not None:
-            i = ALL_JOINTS.index(j.name)
-            ET.SubElement(joint, "axis", xyz=_v(j.axis))
-            ET.SubElement(joint, "limit", lower=_f(ALL_LIMITS.q_min[i]),
-                          upper=_f(ALL_LIMITS.q_max[i]), velocity=_f(ALL_LIMITS.qd_max[i]),
-                          effort=_f(ALL_LIMITS.tau_max[i]))
+        add_link(robot, bodies.get(j.child), j.child)
+        add_joint(robot, j.name, j.parent, j.child, j.xyz, rpy_of(j.R), j.axis, ALL_LIMITS,
+                  ALL_JOINTS.index(j.name) if j.axis is not None else -1)
     ET.indent(robot)
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
 
