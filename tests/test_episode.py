@@ -153,15 +153,22 @@ def test_compound_distance_is_the_minimum_over_its_parts(tmp_path: Path) -> None
 
 
 def test_move_keeps_physics_and_mirror_in_step(tmp_path: Path) -> None:
+    """The physics client moves at once; the render mirror before anything renders from it
+    (``render_client``), lazily."""
     scene = _scene(tmp_path, render=True)
     scene.add_box("hand", (0.1, 0.1, 0.1), trans(1, 0, 0), GREY, moving=True)
+    scene.move("hand", trans(0.5, 0.5, 0.5))
     scene.move("hand", trans(0.2, 0.3, 0.4))
     body = scene["hand"]
     assert scene.mirror is not None
-    for client, bid in ((scene.physics.client, body.ids[0]), (scene.mirror.client,
-                                                               body.render_ids[0])):
-        pos, _ = p.getBasePositionAndOrientation(bid, physicsClientId=client)
-        np.testing.assert_allclose(pos, (0.2, 0.3, 0.4), atol=1e-12)
+    pos, _ = p.getBasePositionAndOrientation(body.ids[0], physicsClientId=scene.physics.client)
+    np.testing.assert_allclose(pos, (0.2, 0.3, 0.4), atol=1e-12)
+    pos, _ = p.getBasePositionAndOrientation(body.render_ids[0],
+                                             physicsClientId=scene.mirror.client)
+    np.testing.assert_allclose(pos, (1, 0, 0), atol=1e-12)  # not yet: nothing rendered
+    client = scene.render_client
+    pos, _ = p.getBasePositionAndOrientation(body.render_ids[0], physicsClientId=client)
+    np.testing.assert_allclose(pos, (0.2, 0.3, 0.4), atol=1e-12)
     with pytest.raises(ConfigError, match="moving"):
         scene.add_box("wall", (1, 1, 1), np.eye(4), GREY)
         scene.move("wall", np.eye(4))
@@ -362,3 +369,55 @@ def test_joint_groups_of_one_urdf_have_their_own_drives_columns_and_distances(
                                                                           "mini_q3"]
     assert [g["name"] for g in body["groups"]] == ["arm", "mini"]
     assert set(body["groups"][1]["links"]) == set(mini.links)
+
+
+# ----------------------------------------------------------------------------- thinned rows
+def _thinned(tmp: Path, log_every: int, duration: float = 0.1):  # type: ignore[no-untyped-def]
+    """A CRS-A465 held by gravity compensation, a box moving through a dip in its
+    distance at t = 0.0425 s (between two 10 ms rows)."""
+    scene = _scene(tmp)
+    robot = scene.add_urdf("crs", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
+    robot.reset(Q0)
+    scene.add_box("box", (0.05, 0.05, 0.05), trans(1.0, 0, 0.3), GREY, moving=True)
+
+    def box(t: float) -> np.ndarray:
+        return trans(0.5 + 40.0 * (t - 0.0425) ** 2, 0.0, 0.3)
+
+    def ctrl(obs: Observation) -> StepResult:
+        return StepResult({"crs": robot.gravity_torques(obs.q["crs"])})
+
+    ep = Episode(scene, {"crs": TorqueDrive(robot)}, ctrl, Columns(), duration,
+                 movers={"box": box}, log_every=log_every)
+    return _run(ep, tmp)
+
+
+def test_log_every_thins_rows_but_not_the_loop(tmp_path: Path) -> None:
+    full = _thinned(tmp_path / "full", 1)
+    thin = _thinned(tmp_path / "thin", 10)
+    assert len(full.trace) == 101 and len(thin.trace) == 11
+    np.testing.assert_array_equal(thin.trace["step"], np.arange(0, 101, 10))
+    # the same simulation: the thinned rows are rows of the full trace
+    merged = full.trace.set_index("step").loc[thin.trace["step"]]
+    np.testing.assert_allclose(merged["q2"].to_numpy(), thin.trace["q2"].to_numpy(), atol=0)
+    # the minimum between two rows is in the summary, at its step
+    low = thin.manifest["summary"]["min_over_all_steps"]["dist_box"]
+    assert low["t_s"] == pytest.approx(0.042, abs=1.5e-3)
+    assert low["min_m"] == pytest.approx(full.trace["dist_box"].min(), abs=1e-12)
+    assert low["min_m"] < thin.trace["dist_box"].min() - 1e-4
+    assert thin.manifest["summary"]["log_every"] == 10
+    assert thin.scene["trace_rows"]["log_every_control_steps"] == 10
+
+
+def test_log_every_keeps_the_last_step(tmp_path: Path) -> None:
+    thin = _thinned(tmp_path, 7, duration=0.05)
+    assert thin.trace["step"].tolist() == [0, 7, 14, 21, 28, 35, 42, 49, 50]
+
+
+@pytest.mark.parametrize("bad", [0, -1, 2.5])
+def test_log_every_is_validated(tmp_path: Path, bad: object) -> None:
+    scene = _scene(tmp_path)
+    robot = scene.add_urdf("crs", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
+    with pytest.raises(ConfigError, match="log_every"):
+        Episode(scene, {"crs": TorqueDrive(robot)}, lambda o: StepResult({}), Columns(), 1.0,
+                log_every=bad)  # type: ignore[arg-type]
+    scene.close()

@@ -1,5 +1,6 @@
-"""Short runs of pomares2011 experiment 1 checked against a committed reference trace, the
-Lyapunov function (10) on an undisturbed run, and the experiment not built yet."""
+"""Short runs of pomares2011 experiments 1 and 2 and of the indirect baseline checked
+against committed reference traces, the Lyapunov function (10) on an undisturbed run, the
+RVC's decay and the arm's stop at s_u*, and configs refused before anything is written."""
 
 from __future__ import annotations
 
@@ -10,41 +11,60 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.pomares2011.config import Exp1Config, Pomares2011Config
+from experiments.pomares2011.config import (
+    Exp1Config,
+    Exp1IndirectConfig,
+    Exp2Config,
+    Pomares2011Config,
+)
 from experiments.pomares2011.run import run
 from repro.errors import ConfigError
 from repro.runs.trace import load_run
 
-REF = Path(__file__).parent / "reference" / "pomares2011" / "exp1.csv"
+REF_DIR = Path(__file__).parent / "reference" / "pomares2011"
 TIMING = ("ctrl_s", "camera_render_s")
+CONFIGS = {"exp1": Exp1Config, "exp2": Exp2Config, "exp1_indirect": Exp1IndirectConfig}
 
 
-def short_config(**kw: object) -> Pomares2011Config:
-    fields: dict[str, object] = {"duration": 0.5, "camera_mode": "exact", **kw}
-    return dataclasses.replace(Exp1Config(), **fields)
+def short_config(name: str = "exp1", **kw: object) -> Pomares2011Config:
+    """0.5 s with the exact camera, a trace row every 5 control steps (every frame)."""
+    fields: dict[str, object] = {"duration": 0.5, "camera_mode": "exact", "log_every": 5,
+                                 **kw}
+    return dataclasses.replace(CONFIGS[name](), **fields)
 
 
-def make_reference(tmp: Path) -> pd.DataFrame:
-    df = load_run(run(short_config(), tmp / "exp1")).trace
+def make_reference(tmp: Path, name: str = "exp1") -> pd.DataFrame:
+    df = load_run(run(short_config(name), tmp / name)).trace
     return df.drop(columns=[c for c in TIMING if c in df.columns])
 
 
-def test_short_run_matches_reference(tmp_path: Path) -> None:
-    got = make_reference(tmp_path)
-    ref = pd.read_csv(REF)
-    assert len(got) == len(ref) == 501
+@pytest.mark.parametrize("name", sorted(CONFIGS))
+def test_short_run_matches_reference(tmp_path: Path, name: str) -> None:
+    got = make_reference(tmp_path, name)
+    ref = pd.read_csv(REF_DIR / f"{name}.csv")
+    assert len(got) == len(ref) == 101
     compared = [c for c in ref.columns if ref[c].dtype.kind == "f"]
     assert len(compared) > 60
     for c in compared:
         tol = 1e-3 if c.startswith(("s", "e_", "su")) else 1e-6
         np.testing.assert_allclose(got[c].to_numpy(float), ref[c].to_numpy(float), atol=tol,
                                    rtol=1e-6, err_msg=c)
+    if name == "exp2":  # the human is far at the start: measured, logged, not acting
+        assert got["dist_m"].between(1.5, 2.5).all() and not got["secondary_active"].any()
+
+
+def test_indirect_baseline_is_not_the_direct_controller(tmp_path: Path) -> None:
+    """The two mini-robot controllers give different torques on the same start."""
+    a = pd.read_csv(REF_DIR / "exp1.csv")
+    b = pd.read_csv(REF_DIR / "exp1_indirect.csv")
+    assert np.abs(a["mini_u2"] - b["mini_u2"]).max() > 1e-3
+    assert np.all(np.isfinite(b["mini_u2"]))
 
 
 def test_lyapunov_function_is_non_increasing_with_the_base_still(tmp_path: Path) -> None:
     """pomares2011 claim 2 (eq. 15): with the PA-10 (nearly) still and a frame every step,
     V (10) of the mini-robot's loop does not increase."""
-    cfg = short_config(duration=1.0, rvc_gain=0.01, camera_period=1)
+    cfg = short_config(duration=1.0, rvc_gain=0.01, camera_period=1, log_every=1)
     df = load_run(run(cfg, tmp_path / "still")).trace
     V = df["V"].to_numpy(float)
     assert V[-1] < 0.5 * V[0]
@@ -60,7 +80,24 @@ def test_the_rvc_drives_the_arm_towards_s_u_star(tmp_path: Path) -> None:
     assert (df["vvs_pos_err_m"] < 1e-3).all()  # the VVS pose is right (exact camera)
 
 
-def test_experiment_2_is_refused_until_built(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match="not built yet"):
-        run(dataclasses.replace(Exp1Config(), experiment="exp2"), tmp_path / "exp2")
-    assert not (tmp_path / "exp2").exists()
+def test_the_arm_stops_for_good_at_s_u_star(tmp_path: Path) -> None:
+    """arm_stop_px above the start error: the arm stops at the first frame and never moves
+    again, with an rvc_reached event; the mini-robot keeps servoing."""
+    out = run(short_config(duration=0.2, arm_stop_px=400.0), tmp_path / "stop")
+    r = load_run(out)
+    qd = r.trace[[f"pa10_u{i}" for i in range(1, 7)]].to_numpy(float)
+    assert np.all(qd == 0.0) and r.trace["arm_reached"].dropna().all()
+    assert (r.events["kind"] == "rvc_reached").sum() == 1
+    assert np.abs(r.trace["mini_u2"]).max() > 0
+
+
+@pytest.mark.parametrize("bad, match", [
+    ({"experiment": "exp2", "human": False}, "human=false"),
+    ({"experiment": "exp1", "human": True}, "no human"),
+    ({"log_every": 7}, "multiple of camera_period"),
+])
+def test_inconsistent_configs_are_refused(tmp_path: Path, bad: dict[str, object],
+                                          match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        run(dataclasses.replace(Exp1Config(), **bad), tmp_path / "bad")
+    assert not (tmp_path / "bad").exists()

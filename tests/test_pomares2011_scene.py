@@ -44,7 +44,7 @@ CONFIGS = {"goal": S.Q_GOAL, "start": S.Q_START}
 @pytest.fixture(scope="module")
 def scene_robot() -> Iterator[tuple[Scene, Robot]]:
     with Scene(WorldConfig(), render=True) as scene:
-        yield scene, S.build_scene(scene, S.Q_GOAL)
+        yield scene, S.build_scene(scene, S.Q_GOAL)[0]
 
 
 def _measure(scene: Scene, robot: Robot, q: np.ndarray

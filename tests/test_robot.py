@@ -329,3 +329,24 @@ def test_solve_ik_unreachable_raises(robot: Robot) -> None:
     target[:3, 3] += np.array([3.0, 0.0, 0.0])  # 3 m further: out of reach
     with pytest.raises(ReproError):
         solve_ik(robot, "ring2", target, Q_HOME, iterations=50)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_pose_to_pb_is_scipys_quaternion(seed: int) -> None:
+    """pose_to_pb's own quaternion equals scipy's from_matrix(...).as_quat() (every branch:
+    random rotations and the half turns about each axis, where the trace is -1) and
+    PyBullet turns it back into the same matrix."""
+    from scipy.spatial.transform import Rotation
+
+    from repro.sim.world import pose_to_pb
+
+    rots = list(Rotation.random(200, random_state=seed).as_matrix())
+    rots += [np.diag(d) for d in ((1.0, -1.0, -1.0), (-1.0, 1.0, -1.0), (-1.0, -1.0, 1.0))]
+    for R in rots:
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, (0.1, -0.2, 0.3)
+        pos, quat = pose_to_pb(T)
+        np.testing.assert_allclose(quat, Rotation.from_matrix(R).as_quat(), atol=1e-15)
+        np.testing.assert_allclose(np.reshape(p.getMatrixFromQuaternion(quat), (3, 3)), R,
+                                   atol=1e-12)
+        assert pos == [0.1, -0.2, 0.3]

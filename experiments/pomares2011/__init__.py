@@ -1,9 +1,10 @@
 """pomares2011: Pomares, Perea, Garcia, Jara, Corrales, Torres, "A Multi-Sensorial Hybrid
 Control for Robotic Manipulation in Human-Robot Workspaces", Sensors 11(10), 2011.
 
-Built so far (issue 8, open): experiment 1 (the PA-10 under the Reference Virtual Camera,
-the mini-robot under the direct hybrid controller). Experiment 2 (the human), the figures
-and the claims come next.
+Experiments 1 (approach, Sec. 7.1) and 2 (the operator enters, Sec. 7.2) and two
+baselines the paper argues for without showing them: experiment 2 without the secondary
+task, and experiment 1 with an indirect (kinematic) visual servo of the mini-robot.
+Experiment 3 (the Barrett hand, Algorithm 1) is the next issue.
 """
 
 from __future__ import annotations
@@ -18,6 +19,17 @@ EXPERIMENTS = Paper(
         Experiment("exp1", "pomares2011", "Sec. 7.1: approach, no human: RVC for the PA-10, "
                    "direct hybrid VS for the mini-robot (Figs. 5-7)", _c.Exp1Config, run,
                    check=check_config),
+        Experiment("exp2", "pomares2011", "Sec. 7.2: the same approach, the operator walks in "
+                   "and reaches near the mini-robot; secondary task (17) (Figs. 8-10)",
+                   _c.Exp2Config, run, check=check_config),
+        Experiment("exp2_no_secondary", "pomares2011", "baseline: experiment 2 without the "
+                   "secondary task (the distance is only measured)", _c.Exp2NoSecondaryConfig,
+                   run, check=check_config),
+        Experiment("exp1_indirect", "pomares2011", "baseline: experiment 1 with an indirect "
+                   "(kinematic IBVS + joint PD) servo of the mini-robot",
+                   _c.Exp1IndirectConfig, run, check=check_config),
     ),
     figures=lazy("experiments.pomares2011.figures", "make_figures"),
+    claims=lazy("experiments.pomares2011.claims", "CLAIMS"),
+    bench=lazy("experiments.pomares2011.bench", "bench"),
 )

@@ -13,8 +13,8 @@ N_POINTS = 4  # pomares2011 Sec. 7: four points
 __all__ = ["N_POINTS", "declare_columns"]
 
 
-def declare_columns() -> Columns:
-    """The controller's columns."""
+def declare_columns(human: bool = False) -> Columns:
+    """The controller's columns (``human``: the distance columns of experiment 2)."""
     cols = Columns()
     cols.add("su{i}_u", "px", "RVC feature {i} (u): projection of P_u through the Reference "
              "Virtual Camera, object pose from VVS (eqs. 19-21); held between frames",
@@ -25,14 +25,30 @@ def declare_columns() -> Columns:
     cols.add("su{i}_v_true", "px", "audit: RVC feature {i} (v) from the true object pose",
              n=N_POINTS, audit=True)
     cols.add("e_u_px", "px", "RMS distance of the RVC features to s_u*")
+    cols.add("arm_reached", "bool", "the RVC error fell under arm_stop_px: the PA-10 "
+             "stopped for good (end of the approach)")
     cols.add("e_s_px", "px", "RMS distance of the camera's detected points to s*")
+    cols.add("e_f1y_px", "px", "f1y - f1y* = v of detected point 1 minus 272 px: the one "
+             "row the primary task keeps while the human is within dmin (Sec. 7.2)")
     cols.add("V", "J", "Lyapunov function (10): 1/2 qd^T M qd + 1/2 e_s^T K_P e_s of the "
              "mini-robot")
     cols.add("e2", "-", "secondary task (17), alpha (1 - dist/dmin) when dist < dmin, else 0")
     cols.add("secondary_active", "bool", "the human is within dmin: primary task reduced")
+    for a in "xyz":
+        cols.add(f"flange_{a}", "m", f"{a} of the PA-10 flange (pa10_flange) in the world, "
+                 "forward kinematics of the measured q (for the 3D paths of Fig. 10)")
     cols.add("vvs_iter", "-", "iterations of the VVS pose estimate of the last frame")
     cols.add("vvs_residual_px", "px", "RMS reprojection residual of the VVS pose")
     cols.add("vvs_converged", "bool", "the VVS stopped on its tolerance, not its budget")
     cols.add("vvs_pos_err_m", "m", "audit: distance between the VVS and the true object "
              "position in the camera frame", audit=True)
+    if human:
+        cols.add("dist_m", "m", "dist of eq. (17), sampled every tracker_period control steps "
+                 "and held: minimum python-fcl distance between the tracked human capsules "
+                 "(true skeleton + tracking noise) and the mini-robot capsules (scene.json "
+                 "mini_capsules) at the measured q")
+        cols.add("dist_true_m", "m", "audit: the same distance with the true skeleton "
+                 "(no tracking noise)", audit=True)
+        cols.add("dist_pair", "-", "closest pair of dist_m: <mini-robot capsule>|<human "
+                 "capsule>")
     return cols

@@ -1,4 +1,5 @@
-"""pomares2011 figures from the traces (experiment 1: Figs. 5-7)."""
+"""pomares2011 figures from the traces: experiment 1 (Figs. 5-7), experiment 2 (Figs. 8-10)
+and the two baselines (no secondary task; indirect visual servo)."""
 
 from __future__ import annotations
 
@@ -39,11 +40,24 @@ def image_trajectory(run: RunFiles, prefix: str, star_key: str, title: str) -> p
     return fig
 
 
+def _shade_active(ax: plt.Axes, df: object) -> None:
+    """Shade the time spans where the secondary task (17) is active."""
+    if "secondary_active" not in df.columns:  # type: ignore[attr-defined]
+        return
+    t = df["t"].to_numpy(float)  # type: ignore[index]
+    a = df["secondary_active"].fillna(False).astype(bool).to_numpy()  # type: ignore[index]
+    edges = np.flatnonzero(np.diff(np.r_[False, a, False].astype(int)))
+    for k0, k1 in zip(edges[::2], edges[1::2], strict=True):
+        ax.axvspan(t[k0], t[min(k1, len(t) - 1)], color="0.85", lw=0, zorder=0)
+
+
 def torques(run: RunFiles, title: str) -> plt.Figure:
-    """The mini-robot's joint torques vs time, with the instant s = s* marked ('1')."""
+    """The mini-robot's joint torques vs time, with the instant s = s* marked ('1') and the
+    spans where the secondary task acts shaded."""
     df = run.trace
     t = df["t"].to_numpy(float)
     fig, ax = plt.subplots(figsize=(3.6, 2.6))
+    _shade_active(ax, df)
     for i in range(3):
         ax.plot(t, df[f"mini_u{i + 1}"], color=PALETTE[i], lw=0.8, label=f"$\\tau_{i + 1}$")
     reached = np.flatnonzero(df["e_s_px"].to_numpy(float) < REACHED_PX)
@@ -54,6 +68,87 @@ def torques(run: RunFiles, title: str) -> plt.Figure:
     ax.set_ylabel("torque (N m)")
     ax.set_title(title)
     ax.legend(fontsize=7)
+    return fig
+
+
+def paths_3d(run: RunFiles, title: str) -> plt.Figure:
+    """3D paths of the PA-10 flange and the mini-robot camera (coloured by whether the
+    secondary task is active) and of the operator's reaching hand (cf. Fig. 10)."""
+    df = run.trace
+    fig = plt.figure(figsize=(4.2, 3.6))
+    ax = fig.add_subplot(projection="3d")
+    fl = df[["flange_x", "flange_y", "flange_z"]].to_numpy(float)
+    cam = df[["camera_x", "camera_y", "camera_z"]].to_numpy(float)
+    act = df["secondary_active"].fillna(False).astype(bool).to_numpy()
+    ax.plot(*fl.T, color=PALETTE[0], lw=1.0, label="PA-10 flange")
+    ax.plot(*cam.T, color=PALETTE[1], lw=0.8, label="camera (primary task)")
+    ax.scatter(*cam[act].T, color=PALETTE[3], s=2, label="camera (secondary task on)")
+    hand = [c for c in ("human_hand_r_x", "human_hand_r_y", "human_hand_r_z") if c in df]
+    if len(hand) == 3:
+        h = df[hand].to_numpy(float)
+        near = np.linalg.norm(h - cam, axis=1) < 0.6
+        ax.plot(*h[near].T, color=PALETTE[2], lw=0.6, ls="--", label="operator's hand")
+    ax.scatter(*fl[0], color=PALETTE[0], marker="o", s=10)
+    ax.scatter(*cam[0], color=PALETTE[1], marker="o", s=10)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
+    ax.set_title(title)
+    ax.legend(fontsize=6, loc="upper left")
+    return fig
+
+
+def distance_baseline(run: RunFiles, base: RunFiles, dmin: float) -> plt.Figure:
+    """Ground-truth minimum distance between the mini-robot and the operator with and
+    without the secondary task, and the controller's capsule distance."""
+    fig, ax = plt.subplots(figsize=(3.8, 2.6))
+    for r, label, color in ((run, "with e2 (exp2)", PALETTE[0]),
+                            (base, "without e2 (baseline)", PALETTE[3])):
+        df = r.trace
+        cols = [c for c in df.columns if c.startswith("mini_dist_human_")]
+        ax.plot(df["t"], df[cols].min(axis=1), color=color, lw=0.9, label=f"{label}: true")
+        ax.plot(df["t"], df["dist_m"], color=color, lw=0.6, ls=":",
+                label=f"{label}: capsules (controller)")
+    _shade_active(ax, run.trace)
+    ax.axhline(dmin, color="k", lw=0.6, ls="--")
+    ax.annotate("$d_{min}$", (run.trace["t"].iloc[0], dmin), va="bottom", fontsize=7)
+    ax.axhline(0.0, color="k", lw=0.6)
+    ax.set_ylim(-0.02, 0.6)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("mini-robot - human (m)")
+    ax.set_title("Secondary task on and off (beyond the paper)")
+    ax.legend(fontsize=6)
+    return fig
+
+
+def indirect_baseline(direct: RunFiles, indirect: RunFiles) -> plt.Figure:
+    """Direct (torque-level) vs indirect (kinematic IBVS + joint PD) servo of the
+    mini-robot on experiment 1: image error, torques and one image trajectory."""
+    fig, axes = plt.subplots(1, 3, figsize=(9.0, 2.7))
+    for r, label, ls in ((direct, "direct", "-"), (indirect, "indirect", "--")):
+        df = r.trace
+        axes[0].semilogy(df["t"], df["e_s_px"], ls=ls, color="k", lw=0.8, label=label)
+        for i in range(3):
+            axes[1].plot(df["t"], df[f"mini_u{i + 1}"], ls=ls, color=PALETTE[i], lw=0.7,
+                         label=f"$\\tau_{i + 1}$ {label}")
+        axes[2].plot(df["s1_u"], df["s1_v"], ls=ls, color=PALETTE[0], lw=0.8, label=label)
+        for i in range(1, N_POINTS):
+            axes[2].plot(df[f"s{i + 1}_u"], df[f"s{i + 1}_v"], ls=ls, color=PALETTE[i], lw=0.8)
+    star = np.asarray(direct.scene["s_star_px"], float)
+    axes[2].plot(star[:, 0], star[:, 1], "kx", ms=5)
+    axes[0].set_xlabel("time (s)")
+    axes[0].set_ylabel("RMS error to s* (px)")
+    axes[0].legend(fontsize=7)
+    axes[1].set_xlabel("time (s)")
+    axes[1].set_ylabel("torque (N m)")
+    axes[1].legend(fontsize=5, ncol=2)
+    axes[2].set_xlim(0, 640)
+    axes[2].set_ylim(480, 0)
+    axes[2].set_aspect("equal")
+    axes[2].set_xlabel("u (px)")
+    axes[2].set_ylabel("v (px)")
+    axes[2].legend(fontsize=7)
+    fig.suptitle("Mini-robot: direct vs indirect visual servo (beyond the paper)", fontsize=9)
     return fig
 
 
@@ -70,4 +165,23 @@ def make_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
                                   "(cf. Fig. 7)"), "fig07")):
             written += save_figure(fig, figures_dir, PAPER, name)
             plt.close(fig)
+    exp2 = load_run_if_present(Path(results_dir) / PAPER, "exp2")
+    if exp2 is not None:
+        for fig, name in (
+                (torques(exp2, "Mini-robot torques, exp. 2 (cf. Fig. 8)"), "fig08"),
+                (image_trajectory(exp2, "s", "s_star_px", "Mini-robot camera, exp. 2 "
+                                  "(cf. Fig. 9)"), "fig09"),
+                (paths_3d(exp2, "Exp. 2: 3D paths (cf. Fig. 10)"), "fig10")):
+            written += save_figure(fig, figures_dir, PAPER, name)
+            plt.close(fig)
+    base = load_run_if_present(Path(results_dir) / PAPER, "exp2_no_secondary")
+    if exp2 is not None and base is not None:
+        fig = distance_baseline(exp2, base, float(exp2.manifest["config"]["dmin"]))
+        written += save_figure(fig, figures_dir, PAPER, "baseline_no_secondary")
+        plt.close(fig)
+    ind = load_run_if_present(Path(results_dir) / PAPER, "exp1_indirect")
+    if exp1 is not None and ind is not None:
+        fig = indirect_baseline(exp1, ind)
+        written += save_figure(fig, figures_dir, PAPER, "baseline_indirect")
+        plt.close(fig)
     return written

@@ -43,13 +43,21 @@ import numpy as np
 import pinocchio as pin
 
 from repro.geometry import Rx, Ry, Rz, inv_T, trans
+from repro.planning.capsules import Capsule
 from repro.sensors.camera import (
     DEFAULT_DOT_COLORS,
     DotTarget,
     Intrinsics,
     check_scene_colors,
 )
-from repro.sim.pa10 import ALL_JOINTS, ALL_LIMITS, BARRETT_PLACEHOLDER, pa10_urdf_path
+from repro.sim.human import HumanBody, HumanInScene, HumanMotion, HumanPath
+from repro.sim.pa10 import (
+    ALL_JOINTS,
+    ALL_LIMITS,
+    BARRETT_PLACEHOLDER,
+    MINI_CAPSULES,
+    pa10_urdf_path,
+)
 from repro.sim.robot import Robot
 from repro.sim.scene import Scene
 
@@ -228,6 +236,40 @@ SCENE_RGBA: dict[str, tuple[float, float, float, float]] = {
 check_scene_colors(DOTS, SCENE_RGBA)  # raises at import if a body could be taken for a dot
 
 
+# --------------------------------------------------------------- the human (experiment 2)
+#: The floor is this far below the table top (the world z = 0) [m]. ours: a 0.75 m
+#: workbench, the PA-10 on a pedestal level with its top.
+FLOOR_Z = -0.75
+#: The operator's visit of experiment 2 (pomares2011 Sec. 7.2: "during the approaching
+#: phase the human enters within the robot workspace", when "the robotic manipulator is near
+#: its desired location"; the path is not given). ours: the operator stands 2.2 m to the
+#: robot's right (-y), walks in from t = 8 s (the RVC error is then ~25 px of 281), reaches
+#: with the right hand towards the part, the hand tip stopping 0.12 m beside the point where
+#: the mini-robot's camera is at the goal (0.55, -0.152, 0.182) m, on the operator's side,
+#: holds 2.5 s, withdraws and walks back, standing at the start again from t = 19 s. Base
+#: frame = the floor below the world origin.
+HUMAN_PATH = HumanPath(start=(0.55, -2.2), approach=(0.55, -0.272, 0.182 - FLOOR_Z),
+                       t_enter=8.0, t_reach=11.5, t_hold=14.0, t_leave=19.0, arm="right")
+#: Clothes colour. ours: light grey-beige (HSV saturation 29/255): no dot mask can take it.
+HUMAN_RGBA = (0.62, 0.58, 0.55, 1.0)
+
+
+def human_motion() -> HumanMotion:
+    """The scripted operator of experiment 2 (Winter-fraction skeleton, tight radii)."""
+    return HumanMotion(HUMAN_PATH, HumanBody(), T_world_base=trans(0.0, 0.0, FLOOR_Z))
+
+
+def mini_capsules(chain: Robot, q: np.ndarray) -> list[tuple[str, Capsule]]:
+    """The mini-robot's capsules (:data:`repro.sim.pa10.MINI_CAPSULES`) in the world at
+    joint positions ``q`` (ALL_JOINTS order) [rad], named ``<link>_<k>``."""
+    out = []
+    for k, (link, p0, p1, r) in enumerate(MINI_CAPSULES):
+        T = chain.frame_pose(link, q)
+        out.append((f"{link}_{k}", Capsule(T[:3, :3] @ np.asarray(p0) + T[:3, 3],
+                                           T[:3, :3] @ np.asarray(p1) + T[:3, 3], r)))
+    return out
+
+
 def rvc_object_pose(T_world_flange: np.ndarray) -> np.ndarray:
     """``M_O^RVC = T_rvc_obj`` (4x4) [m] from the kinematics: the object's true pose in the
     RVC with the flange at ``T_world_flange`` (what the VVS estimate converges to)."""
@@ -235,7 +277,8 @@ def rvc_object_pose(T_world_flange: np.ndarray) -> np.ndarray:
 
 
 def build_scene(scene: Scene, q: np.ndarray | None = None, name: str = "pa10",
-                column_prefix: str = "", render_robot: bool = False) -> Robot:
+                column_prefix: str = "", render_robot: bool = False,
+                human: HumanMotion | None = None) -> tuple[Robot, HumanInScene | None]:
     """Add the robot, the table, the part and its dots to ``scene``; return the robot.
 
     Args:
@@ -244,6 +287,11 @@ def build_scene(scene: Scene, q: np.ndarray | None = None, name: str = "pa10",
         name: the robot's body name; column_prefix: its trace-column prefix.
         render_robot: also put the robot in the render mirror (costly; the mini-robot
             camera does not see it in the chosen configurations).
+        human: the operator (experiment 2): his capsules become moving bodies
+            ``human_<bone>`` (rendered, with collision shapes: ground-truth distances).
+
+    Returns:
+        The robot and the human's scene bodies (None without a human).
 
     Raises:
         ConfigError: a body already in the scene has a colour a dot mask could take
@@ -255,5 +303,9 @@ def build_scene(scene: Scene, q: np.ndarray | None = None, name: str = "pa10",
     scene.add_box("table", TABLE.size, TABLE.T_world, TABLE.rgba)
     scene.add_box("object", OBJECT.size, OBJECT.T_world, OBJECT.rgba)
     scene.add_dot_target("dots", DOTS, OBJECT.T_world)
+    bodies = None
+    if human is not None:
+        bodies = HumanInScene(human, rgba=HUMAN_RGBA)
+        bodies.add(scene, t=0.0)
     scene.check_colors(check_scene_colors)
-    return robot
+    return robot, bodies

@@ -65,6 +65,7 @@ import numpy as np
 from repro.errors import ConfigError
 
 __all__ = ["Gains", "HybridVSConfig", "HybridVSController", "distance_gradient",
+           "distance_gradient_from_joints",
            "gains_from_inertia", "hybrid_torque", "lyapunov", "primary_task",
            "secondary_task", "task_function", "task_jacobian", "weight_matrix"]
 
@@ -295,6 +296,41 @@ def distance_gradient(p_c: np.ndarray, n_c: np.ndarray) -> np.ndarray:
     return np.concatenate([n, np.cross(p, n)])
 
 
+def distance_gradient_from_joints(J_g: np.ndarray, J_p: np.ndarray, n: np.ndarray,
+                                  rank_tol: float = 1e-9) -> np.ndarray:
+    """``d(dist)/dr`` (6,) consistent with the joints, for a closest point on *any* link.
+
+    :func:`distance_gradient` assumes the robot's closest point moves with the camera; on a
+    link before the camera (a mini-robot's second link) that assumption invents a lever arm
+    and a torque on joints that do not move the point. Here the exact joint gradient
+    ``g_q = J_p^T n`` (n,) (``J_p``: the point's linear Jacobian, ``n``: the unit vector from
+    the human's closest point to the robot's, both in one frame) is mapped to the camera-twist
+    space through the least-squares inverse of ``J_g``:
+
+    .. math::
+
+        g_r = J_g (J_g^T J_g)^{+} g_q, \\qquad g_r^T (J_g \\dot q) = g_q^T \\dot q
+        = \\dot{dist}
+
+    (``J_g`` of full column rank n <= 6: ``J_g^T g_r = g_q``). # ours: the paper does not
+    say how it differentiates ``dist``; this is the minimum-norm twist-space gradient that
+    gives the true rate of ``dist`` along every motion the robot can make.
+
+    Args:
+        J_g: (6, n) camera Jacobian in ``{c}`` (eq. 7).
+        J_p: (3, n) linear Jacobian of the robot's closest point [m/rad], axes of ``{c}``.
+        n: (3,) unit vector from the human's closest point to the robot's, axes of ``{c}``.
+        rank_tol: relative singular-value cut of the pseudo-inverse.
+    """
+    J_g = _matrix("J_g", J_g, (N_R, None))
+    J_p = _matrix("J_p", J_p, (3, J_g.shape[1]))
+    n = _vector("n", n, 3)
+    if not abs(np.linalg.norm(n) - 1.0) < 1e-6:
+        raise ValueError(f"n must be a unit vector, got norm {np.linalg.norm(n)}")
+    g_q = J_p.T @ n
+    return np.asarray(J_g @ np.linalg.pinv(J_g.T @ J_g, rcond=rank_tol) @ g_q)
+
+
 def secondary_task(dist: float, grad_dist: np.ndarray, alpha: float, dmin: float
                    ) -> tuple[float, np.ndarray]:
     """pomares2011 eq. (17): ``e2 = alpha (1 - dist/dmin)`` if ``dist < dmin``, else 0,
@@ -336,6 +372,13 @@ class HybridVSConfig:
         avoid_rows: rows of ``s`` the primary task keeps while the secondary task is active
             (experiment 2: ``(1,)``, ``f1y`` alone); None: all rows (then ``W^+W = I`` and
             ``e2`` cannot act).
+        K_v_active: (n, n) derivative gain used instead of ``K_v`` while the secondary task
+            is active [N m s/rad]; None: ``K_v``. ours: ``K_v`` of
+            :func:`gains_from_inertia` damps each visual mode in proportion to its
+            stiffness, so the directions the reduced primary task no longer holds (the
+            null space the secondary task moves in) are barely damped and a constant push
+            accelerates them without bound; a stronger damping there is any SPD ``K_v``,
+            so (15) still holds.
     """
 
     s_star: np.ndarray
@@ -344,6 +387,7 @@ class HybridVSConfig:
     alpha: float
     dmin: float
     avoid_rows: tuple[int, ...] | None = (1,)
+    K_v_active: np.ndarray | None = None
     rank_tol: float = field(default=1e-9)
 
     def __post_init__(self) -> None:
@@ -368,6 +412,13 @@ class HybridVSConfig:
                               f"{s_star.size - 1}), got {self.avoid_rows}")
         object.__setattr__(self, "s_star", s_star)
         object.__setattr__(self, "K_v", K_v)
+        if self.K_v_active is not None:
+            Ka = np.asarray(self.K_v_active, dtype=float)
+            if Ka.shape != K_v.shape or not np.allclose(Ka, Ka.T) or (
+                    np.linalg.eigvalsh(Ka).min() <= 0):
+                raise ConfigError(f"K_v_active must be a symmetric positive-definite "
+                                  f"{K_v.shape} matrix, got {Ka}")
+            object.__setattr__(self, "K_v_active", Ka)
 
 
 class HybridVSController:
@@ -423,7 +474,22 @@ class HybridVSController:
                 raise ValueError(f"dist = {dist} m < dmin = {cfg.dmin} m needs grad_dist")
             e2, de2_dr = secondary_task(dist, grad_dist, cfg.alpha, cfg.dmin)  # eq. (17)
         e = task_function(W, e1, de2_dr)  # eq. (3)
-        tau = hybrid_torque(cfg.k_P, J_g, e, cfg.K_v, qd, G, tau_ff)  # eq. (5)
+        K_v = cfg.K_v_active if (active and cfg.K_v_active is not None) else cfg.K_v
+        tau = hybrid_torque(cfg.k_P, J_g, e, K_v, qd, G, tau_ff)  # eq. (5)
         V = lyapunov(qd, M, e_s, cfg.k_P)  # eq. (10)
         return tau, {"e": e, "e_s": e_s, "e1": e1, "V": V, "e2": e2, "active": active,
                      "m": W.shape[0], "rows": rows}
+
+    def avoid_only(self, qd: np.ndarray, J_g: np.ndarray, G: np.ndarray, dist: float,
+                   grad_dist: np.ndarray) -> tuple[np.ndarray, float]:
+        """Torques of the secondary task alone, ``e = -(de2/dr)^T`` (no image: the features
+        are lost while the human is within ``dmin``), with the active damping. # ours: the
+        paper does not say what happens then; safety does not need the camera.
+
+        Returns:
+            ``(tau, e2)``.
+        """
+        cfg = self.config
+        e2, de2_dr = secondary_task(dist, grad_dist, cfg.alpha, cfg.dmin)
+        K_v = cfg.K_v_active if cfg.K_v_active is not None else cfg.K_v
+        return hybrid_torque(cfg.k_P, J_g, -de2_dr, K_v, qd, G), e2

@@ -193,6 +193,24 @@ MINI_QD_MAX_DEG_S = (120.0, 180.0, 180.0)
 MINI_TAU_MAX = (3.0, 1.0, 0.3)
 
 
+#: The mini-robot's links covered by capsules (swept-sphere lines) for the human-distance
+#: of pomares2011 Sec. 4 (eq. 17): ``(link, p0, p1, radius)``, end points in the link frame
+#: [m]. ours: the paper covers the links with SSLs but gives no sizes; each capsule holds
+#: every box and servo cylinder of its link in ``make_urdf.py`` (tests/test_pa10.py
+#: checks that the capsule distance never exceeds PyBullet's distance to the real
+#: geometry): the radial arm and the post of link 1 (30 x 30 mm boxes, half diagonal
+#: 21 mm, the joint-2 servo r 20 mm x 40 mm), the tube and joint-3 servo of link 2
+#: (r 18 mm x 36 mm: corner 25.5 mm), the bracket and the 40 mm camera body (half
+#: diagonal of its face 28.3 mm, 30 mm behind the optical centre) on link 3.
+MINI_CAPSULES: tuple[tuple[str, tuple[float, float, float], tuple[float, float, float],
+                           float], ...] = (
+    ("mini_link1", (0.055, 0.0, -0.015), (0.13, 0.0, -0.015), 0.022),
+    ("mini_link1", (0.13, 0.0, -0.015), (0.13, 0.0, 0.08), 0.029),
+    ("mini_link2", (0.0, 0.0, 0.0), (0.0, 0.0, 0.10), 0.026),
+    ("mini_link3", (0.0, 0.0, 0.018), (0.0, 0.0, 0.07), 0.029),
+)
+
+
 def _limits(q_deg: tuple[float, ...], qd_deg: tuple[float, ...],
             tau: tuple[float, ...]) -> JointLimits:
     return JointLimits(

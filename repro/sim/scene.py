@@ -187,12 +187,31 @@ class Scene:
         self.mounts: dict[str, dict[str, Any]] = {}
         self.sensors: dict[str, dict[str, Any]] = {}
         self.extra: dict[str, Any] = {}
+        self._mirror_pending: dict[str, np.ndarray] = {}  # moves not yet in the mirror
 
     # ----------------------------------------------------------------- clients
     @property
     def render_client(self) -> int:
-        """Client the cameras render from (the mirror if there is one)."""
-        return self.mirror.client if self.mirror is not None else self.physics.client
+        """Client the cameras render from (the mirror if there is one), with every pending
+        move applied (:meth:`move` updates the mirror lazily, only when something renders)."""
+        if self.mirror is None:
+            return self.physics.client
+        self._sync_mirror()
+        return self.mirror.client
+
+    def _sync_mirror(self) -> None:
+        if self.mirror is None:
+            return
+        for name, T_world in self._mirror_pending.items():
+            body = self.bodies[name]
+            if body.dot_target is not None:
+                move_dot_target(self.mirror.client, body.render_ids, body.dot_target, T_world)
+            else:
+                for bid, part in zip(body.render_ids, body.parts, strict=True):
+                    pos, quat = pose_to_pb(T_world @ part.T_body_part)
+                    p.resetBasePositionAndOrientation(bid, pos, quat,
+                                                      physicsClientId=self.mirror.client)
+        self._mirror_pending.clear()
 
     def close(self) -> None:
         """Disconnect both clients (idempotent)."""
@@ -372,24 +391,21 @@ class Scene:
         return body
 
     def move(self, name: str, T_world: np.ndarray) -> None:
-        """Put body ``name`` at ``T_world`` in both clients (a moving hand, a human)."""
+        """Put body ``name`` at ``T_world`` (a moving hand, a human): at once in the physics
+        client; in the render mirror when something next renders (:attr:`render_client`)."""
         body = self[name]
         if not body.moving:
             raise ConfigError(f"body {name!r} was not added with moving=True")
         T_world = np.asarray(T_world, dtype=float)
         if body.dot_target is not None:
             move_dot_target(self.physics.client, body.ids, body.dot_target, T_world)
-            if body.render_ids:
-                assert self.mirror is not None
-                move_dot_target(self.mirror.client, body.render_ids, body.dot_target, T_world)
         else:
-            for client, ids in ((self.physics.client, body.ids),
-                                (self.mirror.client if self.mirror else -1, body.render_ids)):
-                if not ids:
-                    continue
-                for bid, part in zip(ids, body.parts, strict=True):
-                    pos, quat = pose_to_pb(T_world @ part.T_body_part)
-                    p.resetBasePositionAndOrientation(bid, pos, quat, physicsClientId=client)
+            for bid, part in zip(body.ids, body.parts, strict=True):
+                pos, quat = pose_to_pb(T_world @ part.T_body_part)
+                p.resetBasePositionAndOrientation(bid, pos, quat,
+                                                  physicsClientId=self.physics.client)
+        if body.render_ids:
+            self._mirror_pending[name] = T_world.copy()
         body.T_world = T_world.copy()
 
     def moving_bodies(self) -> list[SceneBody]:

@@ -122,11 +122,29 @@ class World:
 
 
 def pose_to_pb(T: np.ndarray) -> tuple[list[float], list[float]]:
-    """4x4 homogeneous transform -> (position [m], quaternion xyzw) for PyBullet."""
-    from scipy.spatial.transform import Rotation
+    """4x4 homogeneous transform -> (position [m], quaternion xyzw) for PyBullet.
 
-    quat = Rotation.from_matrix(np.asarray(T)[:3, :3]).as_quat()
-    return list(map(float, T[:3, 3])), list(map(float, quat))
+    The rotation part must be a rotation matrix. The quaternion is the one scipy's
+    ``Rotation.from_matrix(R).as_quat()`` gives (the same branch on the largest of the
+    diagonal and the trace, then normalised), computed here directly: this runs for every
+    moving body and camera at every control step."""
+    T = np.asarray(T, dtype=float)
+    R = T[:3, :3]
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    choice = int(np.argmax([R[0, 0], R[1, 1], R[2, 2], tr]))
+    q = np.empty(4)
+    if choice == 3:
+        q[0], q[1], q[2] = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]
+        q[3] = 1.0 + tr
+    else:
+        i = choice
+        j, k = (i + 1) % 3, (i + 2) % 3
+        q[i] = 1.0 - tr + 2.0 * R[i, i]
+        q[j] = R[j, i] + R[i, j]
+        q[k] = R[k, i] + R[i, k]
+        q[3] = R[k, j] - R[j, k]
+    q /= np.sqrt(q @ q)
+    return [float(T[0, 3]), float(T[1, 3]), float(T[2, 3])], [float(v) for v in q]
 
 
 def pb_to_pose(pos: tuple[float, ...], quat: tuple[float, ...]) -> np.ndarray:

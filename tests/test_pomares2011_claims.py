@@ -1,0 +1,155 @@
+"""pomares2011 claim checks on synthetic traces with known answers.
+
+Every check gets runs that reproduce the claim and, for each of its clauses, a variant that
+breaks only that clause: a check replaced by a constant, or a clause dropped, fails here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from experiments.pomares2011 import claims as cl
+from repro.runs.trace import RunFiles
+
+N = 2501  # 25 s at 100 Hz rows
+T = np.arange(N) * 0.01
+
+
+def _run(df: pd.DataFrame, mins: dict[str, float] | None = None) -> RunFiles:
+    ev = pd.DataFrame([], columns=["t", "step", "kind", "detail"])
+    summary = {"stop_reason": "duration reached",
+               "min_over_all_steps": {k: {"min_m": v, "t_s": 11.0}
+                                      for k, v in (mins or {}).items()}}
+    return RunFiles(trace=df, events=ev, manifest={"summary": summary,
+                                                   "config": {"duration": 25.0}},
+                    scene={})
+
+
+def _exp1(**kw: object) -> pd.DataFrame:
+    """s* reached at 5 s while the arm moves (stops at 19 s), V decaying once still,
+    the VVS converged."""
+    e_s = np.where(T < 5.0, 90.0 * np.exp(-T), 1.0)
+    e_u = 281.0 * np.exp(-0.3 * T)
+    arm = T >= 19.0
+    qd = np.where(arm, 0.0, 0.01)
+    V = 2e-3 * np.exp(-0.2 * T)
+    data: dict[str, object] = {
+        "t": T, "e_s_px": e_s, "e_u_px": e_u, "arm_reached": arm, "V": V,
+        "vvs_residual_px": np.full(N, 0.2), "vvs_pos_err_m": np.full(N, 5e-4),
+        "vvs_converged": np.ones(N, bool)}
+    for i in range(1, 7):
+        data[f"pa10_qd{i}"] = qd
+    data.update(kw)
+    return pd.DataFrame(data)
+
+
+def _exp2(active_span: tuple[float, float] = (9.7, 14.6), **kw: object) -> pd.DataFrame:
+    df = _exp1()
+    act = (T >= active_span[0]) & (T < active_span[1])
+    df["secondary_active"] = act
+    df["e_f1y_px"] = np.where(act, 0.5, 8.0)
+    df["dist_m"] = np.where(act, 0.2, 0.5)
+    for a in "xyz":
+        df[f"camera_{a}"] = np.where(act, 0.05, 0.0)
+    for k, v in kw.items():
+        df[k] = v
+    return df
+
+
+def _base() -> pd.DataFrame:
+    df = _exp2(active_span=(0.0, 0.0))
+    for a in "xyz":
+        df[f"camera_{a}"] = 0.0
+    return df
+
+
+def _runs(exp1: pd.DataFrame | None = None, exp2: pd.DataFrame | None = None,
+          d_mini: float = 0.06, d_arm: float = 0.3, d_base: float = 0.03
+          ) -> dict[str, RunFiles]:
+    return {"exp1": _run(_exp1() if exp1 is None else exp1),
+            "exp2": _run(_exp2() if exp2 is None else exp2,
+                         {"mini_dist_human_hand_r": d_mini, "mini_dist_table": 0.01,
+                          "pa10_dist_human_torso": d_arm}),
+            "exp2_no_secondary": _run(_base(), {"mini_dist_human_hand_r": d_base})}
+
+
+CHECKS: dict[str, Callable[[dict[str, RunFiles]], object]] = {
+    "1": cl.check_1, "2": cl.check_2, "3": cl.check_3, "4": cl.check_4}
+
+
+@pytest.mark.parametrize("claim", sorted(CHECKS))
+def test_every_claim_reproduces_on_a_trace_that_does_what_it_says(claim: str) -> None:
+    res = CHECKS[claim](_runs())
+    assert res.status == "reproduced", res.measured  # type: ignore[attr-defined]
+
+
+def _late_reach() -> pd.DataFrame:
+    e_s = np.where(T < 20.0, 18.0, 1.0)  # s* only once the arm has stopped (19 s)
+    return _exp1(e_s_px=e_s)
+
+
+def _wander() -> pd.DataFrame:
+    e_s = np.where(T < 5.0, 90.0 * np.exp(-T), 1.0)
+    e_s[(T > 8) & (T < 9)] = 6.0  # leaves s* while the arm still moves
+    return _exp1(e_s_px=e_s)
+
+
+@pytest.mark.parametrize("runs, clause", [
+    (_runs(exp1=_exp1(e_s_px=np.full(N, 18.0))), "reach s*"),
+    (_runs(exp1=_late_reach()), "still moves"),
+    (_runs(exp1=_wander()), "stay within"),
+    (_runs(exp1=_exp1(e_u_px=np.full(N, 5.0))), "reach s_u*"),
+])
+def test_claim_1_fails_on_each_clause(runs: dict[str, RunFiles], clause: str) -> None:
+    res = cl.check_1(runs)
+    assert res.status == "not_reproduced" and clause in res.measured, res.measured
+
+
+def test_claim_2_fails_when_V_rises_or_the_base_never_stops() -> None:
+    V = 2e-3 * np.exp(-0.2 * T)
+    V[2200] *= 1.5  # a rise after the base stopped
+    res = cl.check_2(_runs(exp1=_exp1(V=V)))
+    assert res.status == "not_reproduced" and "non-increasing" in res.measured
+    V = 2e-3 * np.exp(-0.2 * T)
+    V[1000] *= 1.5  # a rise while the base moves: allowed
+    assert cl.check_2(_runs(exp1=_exp1(V=V))).status == "reproduced"
+    moving = _exp1(**{f"pa10_qd{i}": np.full(N, 0.01) for i in range(1, 7)})
+    res = cl.check_2(_runs(exp1=moving))
+    assert res.status == "not_reproduced" and "never still" in res.measured
+    short = _exp1(**{f"pa10_qd{i}": np.where(T > 24.5, 0.0, 0.01) for i in range(1, 7)})
+    res = cl.check_2(_runs(exp1=short))
+    assert res.status == "not_reproduced" and "still for" in res.measured
+
+
+@pytest.mark.parametrize("col, value, clause", [
+    ("vvs_residual_px", 2.0, "e_v -> 0"),
+    ("vvs_pos_err_m", 0.01, "true pose"),
+])
+def test_claim_3_fails_on_each_clause(col: str, value: float, clause: str) -> None:
+    res = cl.check_3(_runs(exp2=_exp2(**{col: np.full(N, value)})))
+    assert res.status == "not_reproduced" and clause in res.measured, res.measured
+
+
+def test_claim_4_fails_on_each_clause() -> None:
+    res = cl.check_4(_runs(d_mini=0.035))
+    assert res.status == "not_reproduced" and "moves the mini-robot away" in res.measured
+    res = cl.check_4(_runs(d_mini=-0.01, d_base=-0.05))
+    assert res.status == "not_reproduced" and "dist > 0" in res.measured
+    res = cl.check_4(_runs(d_arm=-0.001))
+    assert res.status == "not_reproduced" and "dist > 0" in res.measured
+    f1y = _exp2()
+    f1y.loc[(T > 10) & (T < 10.5), "e_f1y_px"] = 30.0
+    res = cl.check_4(_runs(exp2=f1y))
+    assert res.status == "not_reproduced" and "f1y stays" in res.measured
+    res = cl.check_4(_runs(exp2=_exp2(e_s_px=np.full(N, 20.0))))
+    assert res.status == "not_reproduced" and "s -> s*" in res.measured
+    res = cl.check_4(_runs(exp2=_exp2(active_span=(9.7, 30.0))))  # the human never leaves
+    assert res.status == "not_reproduced" and "s -> s*" in res.measured
+    res = cl.check_4(_runs(exp2=_exp2(active_span=(0.0, 0.0))))
+    assert res.status == "not_reproduced" and "never came within dmin" in res.measured
+    # the human touching without e2 is said
+    assert "touches" in cl.check_4(_runs(d_base=-0.01)).measured
