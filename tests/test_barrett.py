@@ -13,15 +13,14 @@ Every simulation runs in its own PyBullet DIRECT client at 1 kHz.
 
 from __future__ import annotations
 
-import importlib.util
 import itertools
-import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pinocchio as pin
 import pybullet as p
 import pytest
+from asset_scripts import import_script
 
 from repro.assets.urdf_primitives import mass_properties
 from repro.errors import ConfigError
@@ -87,16 +86,7 @@ def _finger_q(q: np.ndarray, k: int) -> tuple[float, float, float]:
 
 def _make_urdf_module():  # type: ignore[no-untyped-def]
     """repro/assets/barrett_bh8/make_urdf.py, imported from its file."""
-    script = B.bh8_urdf_path().with_name("make_urdf.py")
-    spec = importlib.util.spec_from_file_location("bh8_make_urdf", script)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        del sys.modules[spec.name]
-    return module
+    return import_script(B.bh8_urdf_path().with_name("make_urdf.py"), "bh8_make_urdf")
 
 
 def _hand(world: World) -> tuple[Robot, B.HandCouplings, list[B.FingerDrive]]:

@@ -8,14 +8,13 @@ z, -y, -y, z, -y, z, and chan2011's eT_c = Rz(90 deg) Rx(-12.5 deg) T(0, -0.085,
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pinocchio as pin
 import pybullet as p
 import pytest
+from asset_scripts import import_script
 from scipy.spatial.transform import Rotation
 
 from repro.errors import ConfigError
@@ -370,15 +369,7 @@ def test_holds_outstretched_arm_against_gravity(robot: Robot) -> None:
 
 
 def test_committed_urdf_is_make_urdf_output() -> None:
-    script = crs_urdf_path().with_name("make_urdf.py")
-    spec = importlib.util.spec_from_file_location("crs_make_urdf", script)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        del sys.modules[spec.name]
+    module = import_script(crs_urdf_path().with_name("make_urdf.py"), "crs_make_urdf")
     text = module.build_urdf()
     assert text == module.build_urdf()  # deterministic
     assert crs_urdf_path().read_text() == text, (

@@ -10,15 +10,14 @@ link masses, and the BH8-282 masses (base 0.60 kg, finger 0.179 kg) and palm pla
 
 from __future__ import annotations
 
-import importlib.util
 import itertools
-import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pinocchio as pin
 import pybullet as p
 import pytest
+from asset_scripts import import_script
 
 from repro.assets.urdf_primitives import mass_properties
 from repro.errors import ConfigError
@@ -451,16 +450,7 @@ def test_torque_limits_hold_worst_gravity_pose(robot: Robot) -> None:
 
 def _make_urdf_module():  # type: ignore[no-untyped-def]
     """repro/assets/pa10/make_urdf.py, imported from its file."""
-    script = pa10_urdf_path().with_name("make_urdf.py")
-    spec = importlib.util.spec_from_file_location("pa10_make_urdf", script)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        del sys.modules[spec.name]
-    return module
+    return import_script(pa10_urdf_path().with_name("make_urdf.py"), "pa10_make_urdf")
 
 
 def test_committed_urdf_is_make_urdf_output() -> None:

@@ -9,7 +9,9 @@ committed URDF byte for byte (each asset's test checks it).
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -17,7 +19,7 @@ from scipy.spatial.transform import Rotation
 from repro.sim.robot import JointLimits
 
 __all__ = ["Body", "Shape", "add_joint", "add_link", "fmt", "fmt_vec", "geometry",
-           "mass_properties", "principal_axes", "rpy_of"]
+           "mass_properties", "principal_axes", "rpy_of", "urdf_text", "write_urdf"]
 
 
 @dataclass(frozen=True)
@@ -162,3 +164,16 @@ def add_joint(robot: ET.Element, name: str, parent: str, child: str,
         ET.SubElement(joint, "limit", lower=fmt(limits.q_min[index]),
                       upper=fmt(limits.q_max[index]), velocity=fmt(limits.qd_max[index]),
                       effort=fmt(limits.tau_max[index]))
+
+
+def urdf_text(robot: ET.Element) -> str:
+    """The deterministic text of a URDF tree (indented, XML declaration, final newline)."""
+    ET.indent(robot)
+    return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
+
+
+def write_urdf(path: Path, build: Callable[[], str]) -> int:
+    """A generator script's ``main``: write ``build()`` to ``path``; exit status 0."""
+    path.write_text(build())
+    print(f"wrote {path}")
+    return 0

@@ -25,7 +25,16 @@ from pathlib import Path
 
 import numpy as np
 
-from repro.assets.urdf_primitives import Body, Shape, add_joint, add_link, fmt_vec, geometry
+from repro.assets.urdf_primitives import (
+    Body,
+    Shape,
+    add_joint,
+    add_link,
+    fmt_vec,
+    geometry,
+    urdf_text,
+    write_urdf,
+)
 from repro.sim.barrett import (
     BH8_A1,
     BH8_A2,
@@ -165,14 +174,11 @@ def build_urdf() -> str:
             geometry(ET.SubElement(link, "collision"), _tip_shape())
         add_joint(robot, jt.name, jt.parent, jt.child, jt.xyz, jt.rpy, jt.axis, BH8_LIMITS,
                   BH8_JOINTS.index(jt.name) if jt.axis is not None else -1)
-    ET.indent(robot)
-    return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
+    return urdf_text(robot)
 
 
 def main() -> int:
-    URDF_PATH.write_text(build_urdf())
-    print(f"wrote {URDF_PATH}")
-    return 0
+    return write_urdf(URDF_PATH, build_urdf)
 
 
 if __name__ == "__main__":

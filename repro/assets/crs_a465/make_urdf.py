@@ -25,6 +25,8 @@ from repro.assets.urdf_primitives import (
     Shape,
     add_joint,
     add_link,
+    urdf_text,
+    write_urdf,
 )
 from repro.sim.crs_a465 import (
     CRS_JOINTS,
@@ -146,14 +148,11 @@ def build_urdf() -> str:
     for j in joints():
         add_link(robot, bodies.get(j.child), j.child)
         add_joint(robot, j.name, j.parent, j.child, j.xyz, j.rpy, j.axis, CRS_LIMITS, j.index)
-    ET.indent(robot)
-    return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
+    return urdf_text(robot)
 
 
 def main() -> int:
-    URDF_PATH.write_text(build_urdf())
-    print(f"wrote {URDF_PATH}")
-    return 0
+    return write_urdf(URDF_PATH, build_urdf)
 
 
 if __name__ == "__main__":

@@ -27,6 +27,8 @@ from repro.assets.urdf_primitives import (
     add_joint,
     add_link,
     rpy_of,
+    urdf_text,
+    write_urdf,
 )
 from repro.sim.pa10 import (
     ALL_JOINTS,
@@ -239,14 +241,11 @@ def build_urdf() -> str:
         add_link(robot, bodies.get(j.child), j.child)
         add_joint(robot, j.name, j.parent, j.child, j.xyz, rpy_of(j.R), j.axis, ALL_LIMITS,
                   ALL_JOINTS.index(j.name) if j.axis is not None else -1)
-    ET.indent(robot)
-    return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
+    return urdf_text(robot)
 
 
 def main() -> int:
-    URDF_PATH.write_text(build_urdf())
-    print(f"wrote {URDF_PATH}")
-    return 0
+    return write_urdf(URDF_PATH, build_urdf)
 
 
 if __name__ == "__main__":
