@@ -25,6 +25,10 @@ class Pomares2011Config:
                              help="render = PyBullet image + OpenCV; exact = projection")
     rvc_gain: float = param(0.3, unit="1/s", range=(0.01, 10.0),
                             help="lambda of the RVC law (18)")  # ours: the paper gives none; at 0.6/s the PA-10 carries the camera faster than the 3-DoF mini-robot (180 deg/s) can follow and the dots leave the image at 0.2 s
+    arm_drive: str = param("position_reference", choices=("position_reference", "velocity"),
+                           help="the PA-10's drive: velocity motors, or the velocity command "
+                                "integrated into a position reference tracked by the joint "
+                                "PD at 1 kHz")  # ours: measured on exp1: PyBullet's velocity motor on the loaded wrist joint 5 lags its command by a steady 4e-4 rad/s, so the P-type law (18) settles 6 px short of s_u*; a real servo drive closes a position loop
     arm_stop_px: float = param(1.0, unit="px", range=(0.01, 1000.0),
                                help="the PA-10 stops for good once the RVC error is under "
                                     "this (s_u* reached, Sec. 7.1)")  # ours: the paper runs "until the robotic manipulator achieves the corresponding desired features"; 1 px is 4x the detection error

@@ -34,7 +34,7 @@ from repro.errors import ConfigError
 from repro.geometry import inv_T
 from repro.planning.capsules import Capsule, capsule_closest_points, min_distance
 from repro.sensors.camera import Camera
-from repro.sim.drives import TorqueDrive, VelocityDrive
+from repro.sim.drives import PositionReferenceDrive, TorqueDrive, VelocityDrive
 from repro.sim.episode import CameraRig, Episode, Observation, StepResult, View, run_episode
 from repro.sim.human import HumanMotion, add_tracking_noise
 from repro.sim.pa10 import ALL_JOINTS, MINI_CAPSULES, MINI_JOINTS, PA10_JOINTS
@@ -305,11 +305,20 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
         bones = _Bones(human)
         for name, _ in human.capsules(0.0):
             movers[bodies.prefix + name] = bones.pose(name)
-    ep = Episode(scene, {"arm": VelocityDrive(arm), "mini": TorqueDrive(mini)}, ctrl,
+    ep = Episode(scene, {"arm": _arm_drive(arm, config.arm_drive), "mini": TorqueDrive(mini)}, ctrl,
                  declare_columns(config.human), config.duration, cameras=[rig],
                  movers=movers, video=config.video, video_every=33,
                  view=View((0.5, -0.3, 0.3), 2.0, 20, -25), log_every=config.log_every)
     return ep, ctrl
+
+
+def _arm_drive(arm: JointGroup, kind: str) -> VelocityDrive | PositionReferenceDrive:
+    """The PA-10's drive: the RVC's joint velocities through PyBullet's velocity motors, or
+    integrated into a position reference tracked by the joint PD at the physics rate (a
+    servo drive with a position loop, as chan2011's inner loop)."""
+    if kind == "velocity":
+        return VelocityDrive(arm)
+    return PositionReferenceDrive(arm, "pd")
 
 
 class _Bones:
