@@ -153,3 +153,14 @@ def test_claim_4_fails_on_each_clause() -> None:
     assert res.status == "not_reproduced" and "never came within dmin" in res.measured
     # the human touching without e2 is said
     assert "touches" in cl.check_4(_runs(d_base=-0.01)).measured
+
+
+def test_claim_2_window_starts_after_the_last_motion() -> None:
+    """A base at rest before it starts moving is not 'still': the window begins after its
+    last motion (a rise of V at the start, before the arm moves, does not count)."""
+    qd = np.where((T >= 1.0) & (T < 19.0), 0.01, 0.0)
+    V = 2e-3 * np.exp(-0.2 * T)
+    V[50] *= 1.5
+    df = _exp1(V=V, **{f"pa10_qd{i}": qd for i in range(1, 7)})
+    res = cl.check_2(_runs(exp1=df))
+    assert res.status == "reproduced" and "still from 19.00 s" in res.measured, res.measured

@@ -86,8 +86,9 @@ def paths_3d(run: RunFiles, title: str) -> plt.Figure:
     hand = [c for c in ("human_hand_r_x", "human_hand_r_y", "human_hand_r_z") if c in df]
     if len(hand) == 3:
         h = df[hand].to_numpy(float)
-        near = np.linalg.norm(h - cam, axis=1) < 0.6
-        ax.plot(*h[near].T, color=PALETTE[2], lw=0.6, ls="--", label="operator's hand")
+        far = np.linalg.norm(h - cam, axis=1) >= 0.6  # only where it comes near the robot
+        h[far] = np.nan
+        ax.plot(*h.T, color=PALETTE[2], lw=0.6, ls="--", label="operator's hand (< 0.6 m)")
     ax.scatter(*fl[0], color=PALETTE[0], marker="o", s=10)
     ax.scatter(*cam[0], color=PALETTE[1], marker="o", s=10)
     ax.set_xlabel("x (m)")
@@ -136,6 +137,14 @@ def indirect_baseline(direct: RunFiles, indirect: RunFiles) -> plt.Figure:
             axes[2].plot(df[f"s{i + 1}_u"], df[f"s{i + 1}_v"], ls=ls, color=PALETTE[i], lw=0.8)
     star = np.asarray(direct.scene["s_star_px"], float)
     axes[2].plot(star[:, 0], star[:, 1], "kx", ms=5)
+    tau = np.concatenate([r.trace[[f"mini_u{i}" for i in (1, 2, 3)]].to_numpy(float).ravel()
+                          for r in (direct, indirect)])
+    lo, hi = np.nanpercentile(tau, [0.5, 99.5])
+    pad = 0.1 * (hi - lo)
+    axes[1].set_ylim(lo - pad, hi + pad)
+    peak = float(np.nanmax(np.abs(tau)))
+    if peak > max(abs(lo), abs(hi)) + pad:
+        axes[1].set_title(f"start-up peaks up to {peak:.2f} N m clipped", fontsize=7)
     axes[0].set_xlabel("time (s)")
     axes[0].set_ylabel("RMS error to s* (px)")
     axes[0].legend(fontsize=7)
