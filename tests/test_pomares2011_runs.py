@@ -101,3 +101,22 @@ def test_inconsistent_configs_are_refused(tmp_path: Path, bad: dict[str, object]
     with pytest.raises(ConfigError, match=match):
         run(dataclasses.replace(Exp1Config(), **bad), tmp_path / "bad")
     assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.parametrize("mode, tol", [("exact", 1e-4), ("render", 1.0)])
+def test_s_u_star_is_learned_at_the_goal(tmp_path: Path, mode: str, tol: float) -> None:
+    """The learning stage (Sec. 5.1 step 4) gives the paper's s_u* back: P_u was placed so
+    that it does (to 1e-4 px with the exact camera, to 1 px with the rendered one), and the
+    controller servoes on the learned values written to scene.json."""
+    from experiments.pomares2011 import scene as sc
+    from experiments.pomares2011.run import build
+
+    ep, ctrl = build(short_config(camera_mode=mode), tmp_path / mode)
+    try:
+        np.testing.assert_allclose(ctrl.s_u_star, sc.S_U_STAR, atol=tol)
+        assert not np.array_equal(ctrl.s_u_star, sc.S_U_STAR) or mode == "exact"
+        assert np.array_equal(ep.scene.extra["s_u_star_px"], ctrl.s_u_star)
+        # the robot is back at its start
+        np.testing.assert_allclose(ep.cameras[0].robot.q(), sc.Q_START, atol=1e-12)
+    finally:
+        ep.scene.close()

@@ -103,6 +103,11 @@ def check_1(runs: dict[str, RunFiles]) -> ClaimResult:
         star = np.asarray(run.scene["s_u_star_px"], float)
         e_true = float(np.sqrt(np.mean(np.sum((su - star) ** 2, axis=1))))
         truth = f" (with the true object pose {e_true:.2f} px)"
+    if "s_u_star_paper_px" in run.scene:
+        paper = np.asarray(run.scene["s_u_star_paper_px"], float)
+        star = np.asarray(run.scene["s_u_star_px"], float)
+        d = float(np.sqrt(np.mean(np.sum((star - paper) ** 2, axis=1))))
+        truth += f"; s_u* learned at the goal, {d:.2f} px RMS from the paper's values"
     measured = (f"mini-robot RMS error {e_s[np.isfinite(e_s)][0]:.0f} -> "
                 f"{e_s[np.isfinite(e_s)][-1]:.2f} px; {reached}; the PA-10 stops (RVC error < "
                 f"arm_stop_px) at {t_arm:.2f} s; "

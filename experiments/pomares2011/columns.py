@@ -24,7 +24,8 @@ def declare_columns(human: bool = False) -> Columns:
              n=N_POINTS, audit=True)
     cols.add("su{i}_v_true", "px", "audit: RVC feature {i} (v) from the true object pose",
              n=N_POINTS, audit=True)
-    cols.add("e_u_px", "px", "RMS distance of the RVC features to s_u*")
+    cols.add("e_u_px", "px", "RMS distance of the RVC features to s_u* (learned before the run, "
+             "scene.json s_u_star_px)")
     cols.add("arm_reached", "bool", "the RVC error fell under arm_stop_px: the PA-10 "
              "stopped for good (end of the approach)")
     cols.add("e_s_px", "px", "RMS distance of the camera's detected points to s*")

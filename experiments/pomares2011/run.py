@@ -29,8 +29,8 @@ from repro.control.indirect_vs import (
     IndirectVSController,
     pd_gains_from_inertia,
 )
-from repro.control.rvc import rvc_features, rvc_joint_velocity
-from repro.errors import ConfigError
+from repro.control.rvc import learn_desired_features, rvc_features, rvc_joint_velocity
+from repro.errors import ConfigError, SensorError
 from repro.geometry import inv_T
 from repro.planning.capsules import Capsule, capsule_closest_points, min_distance
 from repro.sensors.camera import Camera
@@ -109,14 +109,62 @@ def human_distance(chain: Robot, q: np.ndarray, tracked: list[tuple[str, Capsule
     return HumanDistance(float(d), grad, f"{mini[i][0]}|{tracked[j][0]}", float(d_true))
 
 
+class Learned(NamedTuple):
+    """The learning stage's outcome (pomares2011 Sec. 5.1, step 4)."""
+
+    s_u_star: np.ndarray  # (4, 2) [px] learned desired RVC features
+    uv_goal: np.ndarray  # (4, 2) [px] what the camera detected at the goal
+    vvs_residual_px: float
+    vvs_pos_err_m: float  # audit: VVS position error vs the true object pose
+
+
+def learn_s_u_star(scene: Scene, chain: Robot, rig: CameraRig) -> Learned:
+    """s_u* by the learning stage: the robot placed at its goal configuration
+    (:data:`scene.Q_GOAL`), one camera frame (rendered and detected like every frame of the
+    run), the object pose by PnP + VVS (22)-(24), M_O^RVC from the kinematics, and the
+    projection of P_u (19)-(21) (:func:`repro.control.rvc.learn_desired_features`). The
+    robot is put back where it was.
+
+    Raises:
+        SensorError: the camera does not see the four dots at the goal, or no pose is found.
+    """
+    q0 = chain.q()
+    chain.reset(np.asarray(sc.Q_GOAL, float))
+    try:
+        body = scene[rig.target]
+        assert body.dot_target is not None
+        T_wc = rig.pose(chain.q())
+        uv, found, _ = rig.camera.measure(scene.render_client, T_wc, body.dot_target,
+                                          body.T_world)
+        if not found.all():
+            raise SensorError(f"learning stage: dots {(np.flatnonzero(~found) + 1).tolist()} "
+                              "not detected with the robot at its goal")
+        T0 = pose_from_points(sc.POINTS_P, uv, sc.INTRINSICS.K())
+        if T0 is None:
+            raise SensorError("learning stage: PnP found no object pose at the goal")
+        res = vvs_pose(sc.POINTS_P, uv, sc.INTRINSICS, T0)
+        q = chain.q()
+        T_world_rvc = chain.frame_pose("pa10_flange", q) @ sc.T_FLANGE_RVC
+        T_rvc_obj = inv_T(T_world_rvc) @ T_wc @ res.T_cam_obj  # M_O^RVC at the goal
+        s_u = learn_desired_features(sc.RVC_INTRINSICS, T_rvc_obj, sc.POINTS_U)
+        T_true = inv_T(T_wc) @ sc.OBJECT.T_world
+        err = float(np.linalg.norm(res.T_cam_obj[:3, 3] - T_true[:3, 3]))
+        return Learned(np.asarray(s_u), uv, float(res.residual_px), err)
+    finally:
+        chain.reset(q0)
+
+
 class Pomares2011Controller:
     """Camera frame -> VVS pose (22)-(24) -> RVC law (18) for the PA-10; the direct hybrid
     controller (1)-(5), (17) for the mini-robot at every control step (features held between
     frames), or the indirect baseline. ``__call__`` is the episode runner's controller."""
 
     def __init__(self, config: Pomares2011Config, chain: Robot, arm: JointGroup,
-                 mini: JointGroup, human: HumanMotion | None = None) -> None:
+                 mini: JointGroup, human: HumanMotion | None = None,
+                 s_u_star: np.ndarray | None = None) -> None:
         self.config, self.chain, self.arm, self.mini = config, chain, arm, mini
+        #: the RVC's desired features [px]: the learning stage's (default: the paper's)
+        self.s_u_star = np.asarray(sc.S_U_STAR if s_u_star is None else s_u_star, float)
         self.human = human
         self.rng = np.random.default_rng(config.seed)
         self.T_mc_obj: np.ndarray | None = None
@@ -159,7 +207,7 @@ class Pomares2011Controller:
         T_world_mc = self.chain.frame_pose("mini_camera_optical", q)
         T_rvc_obj = inv_T(T_world_rvc) @ T_world_mc @ res.T_cam_obj  # M_O^RVC (Sec. 5.1)
         feats = rvc_features(sc.RVC_INTRINSICS, T_rvc_obj, sc.POINTS_U)  # (19)-(21)
-        e_u = float(np.sqrt(np.mean(np.sum((feats.uv - sc.S_U_STAR) ** 2, axis=1))))
+        e_u = float(np.sqrt(np.mean(np.sum((feats.uv - self.s_u_star) ** 2, axis=1))))
         if not self.arm_reached and e_u < self.config.arm_stop_px:
             self.arm_reached = True  # s_u* reached: the approach is over, the arm stays
             events.append(("rvc_reached", f"RVC error {e_u:.2f} px < arm_stop_px = "
@@ -168,7 +216,7 @@ class Pomares2011Controller:
             self.qd_arm = np.zeros(self.arm.n)
         else:
             eJ_e = self.chain.frame_jacobian("pa10_flange", q)[:, self.arm.idx]
-            self.qd_arm = rvc_joint_velocity(feats, sc.S_U_STAR, sc.RVC_INTRINSICS,
+            self.qd_arm = rvc_joint_velocity(feats, self.s_u_star, sc.RVC_INTRINSICS,
                                              self.config.rvc_gain, sc.T_FLANGE_RVC, eJ_e,
                                              np.asarray(self.arm.limits.qd_max), "scale")  # (18)
         T_true = inv_T(T_world_mc) @ sc.OBJECT.T_world  # audit: the true object pose
@@ -290,8 +338,17 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
                     "the Reference Virtual Camera (virtual: nothing is rendered)")
     rig = CameraRig("camera", "s", Camera(sc.INTRINSICS, mode=config.camera_mode), chain,
                     "mini_camera_optical", np.eye(4), "dots", period=config.camera_period)
-    ctrl = Pomares2011Controller(config, chain, arm, mini, human)
-    scene.extra.update(s_star_px=sc.S_STAR, s_u_star_px=sc.S_U_STAR,
+    learned = learn_s_u_star(scene, chain, rig)  # Sec. 5.1 step (4), before the run
+    ctrl = Pomares2011Controller(config, chain, arm, mini, human, learned.s_u_star)
+    scene.extra.update(s_star_px=sc.S_STAR, s_u_star_px=learned.s_u_star,
+                       s_u_star_paper_px=sc.S_U_STAR,
+                       s_u_star_learning={
+                           "what": "s_u_star_px is learned before the run (pomares2011 Sec. "
+                                   "5.1 step 4): the robot at q_goal, one camera frame, PnP + "
+                                   "VVS object pose, P_u projected through the RVC",
+                           "q": sc.Q_GOAL, "detected_uv_px": learned.uv_goal,
+                           "vvs_residual_px": learned.vvs_residual_px,
+                           "vvs_pos_err_m": learned.vvs_pos_err_m},
                        points_u_object=sc.POINTS_U, q_goal=sc.Q_GOAL,
                        rvc={"mount": "rvc", "intrinsics": "same as the camera's"},
                        mini_capsules=[{"link": link, "p0": p0, "p1": p1, "radius": r}
