@@ -4,12 +4,14 @@ Control for Robotic Manipulation in Human-Robot Workspaces", Sensors 11(10), 201
 Experiments 1 (approach, Sec. 7.1) and 2 (the operator enters, Sec. 7.2) and two
 baselines the paper argues for without showing them: experiment 2 without the secondary
 task, and experiment 1 with an indirect (kinematic) visual servo of the mini-robot.
-Experiment 3 (the Barrett hand, Algorithm 1) is the next issue.
+Experiment 3: the Barrett hand (fixed base: the PA-10 is still while manipulating) grasps a
+cylinder and moves it under Algorithm 1, and the same trajectory without tactile control.
 """
 
 from __future__ import annotations
 
 from experiments.pomares2011 import config as _c
+from experiments.pomares2011 import exp3 as _e3
 from experiments.pomares2011.run import check_config, run
 from repro.runs.registry import Experiment, Paper, lazy
 
@@ -28,6 +30,12 @@ EXPERIMENTS = Paper(
         Experiment("exp1_indirect", "pomares2011", "baseline: experiment 1 with an indirect "
                    "(kinematic IBVS + joint PD) servo of the mini-robot",
                    _c.Exp1IndirectConfig, run, check=check_config),
+        Experiment("exp3", "pomares2011", "Secs. 6, 7.3: the Barrett hand grasps a cylinder, "
+                   "then a planned finger trajectory under Algorithm 1 (Figs. 11-12)",
+                   _e3.Exp3Config, _e3.run, check=_e3.check_config),
+        Experiment("exp3_no_tactile", "pomares2011", "ablation: the same trajectory without "
+                   "tactile control", _e3.Exp3NoTactileConfig, _e3.run,
+                   check=_e3.check_config),
     ),
     figures=lazy("experiments.pomares2011.figures", "make_figures"),
     claims=lazy("experiments.pomares2011.claims", "CLAIMS"),

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from experiments.pomares2011.exp3_claims import CLAIM_5
 from repro.runs.claims import Claim, ClaimResult
 from repro.runs.trace import RunFiles
 
@@ -209,7 +210,7 @@ def check_4(runs: dict[str, RunFiles]) -> ClaimResult:
             k_off < len(t) - 1 and e_end < REACHED_PX})
 
 
-CLAIMS: tuple[Claim, ...] = (
+CLAIMS_1_4: tuple[Claim, ...] = (
     Claim(PAPER, "1", "Exp 1: the mini-robot features reach s*, then stay there while the "
           "PA-10 moves; the RVC features reach s_u*",
           f"s = s* before the PA-10 stops (RMS < {REACHED_PX:g} px), within {STAY_PX:g} px "
@@ -227,3 +228,6 @@ CLAIMS: tuple[Claim, ...] = (
           f"|f1y - 272| <= {F1Y_TOL_PX:g} px; final RMS < {REACHED_PX:g} px",
           ("exp2", "exp2_no_secondary"), check_4, whole_run=("exp2", "exp2_no_secondary")),
 )
+
+#: Claims 1-4 (this module) and claim 5 (experiment 3, :mod:`experiments.pomares2011.exp3_claims`).
+CLAIMS: tuple[Claim, ...] = (*CLAIMS_1_4, CLAIM_5)

@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from experiments.pomares2011.columns import N_POINTS  # noqa: E402
+from experiments.pomares2011.exp3_figures import make_exp3_figures  # noqa: E402
 from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
 from repro.runs.trace import RunFiles, load_run_if_present  # noqa: E402
 
@@ -193,4 +194,4 @@ def make_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
         fig = indirect_baseline(exp1, ind)
         written += save_figure(fig, figures_dir, PAPER, "baseline_indirect")
         plt.close(fig)
-    return written
+    return written + make_exp3_figures(Path(results_dir), Path(figures_dir))
