@@ -137,3 +137,59 @@ def test_pd_gains_set_every_mode() -> None:
     np.testing.assert_allclose(np.linalg.solve(M, g.K_d), 120.0 * np.eye(3), atol=1e-9)
     with pytest.raises(ConfigError):
         pd_gains_from_inertia(-M, 60.0)
+
+
+def _twist_fd(chain: Robot, frame: str, q: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    """(6, 9) local-frame Jacobian of ``frame`` by central differences of its pose:
+    column i = log(T(q - h e_i)^-1 T(q + h e_i)) / (2 h)."""
+    import pinocchio as pin
+
+    J = np.zeros((6, len(q)))
+    for i in range(len(q)):
+        dq = np.zeros(len(q))
+        dq[i] = h
+        Tm, Tp = chain.frame_pose(frame, q - dq), chain.frame_pose(frame, q + dq)
+        J[:, i] = pin.log6(pin.SE3(np.linalg.inv(Tm) @ Tp)).vector / (2 * h)
+    return J
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("frame", ["pa10_flange", "mini_camera_optical"])
+def test_chain_jacobians_match_finite_differences(chain: Robot, seed: int, frame: str) -> None:
+    """The PA-10's flange Jacobian (the RVC's eJ_e) and the mini-robot camera's (J_g of eq. 7)
+    against finite differences over all nine joints, on random configurations."""
+    rng = np.random.default_rng(seed)
+    q = np.array(sc.Q_GOAL, dtype=float) + rng.uniform(-0.5, 0.5, size=len(sc.Q_GOAL))
+    J = chain.frame_jacobian(frame, q)
+    np.testing.assert_allclose(J, _twist_fd(chain, frame, q), atol=1e-6)
+    if frame == "pa10_flange":  # the mini-robot's joints do not move the flange
+        assert np.abs(J[:, MINI_IDX]).max() == 0.0
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_mini_robot_task_jacobian_matches_finite_differences(chain: Robot, seed: int) -> None:
+    """J = L_s J_g (eq. 6) of the four dots in pixels against finite differences of their
+    exact projections over the mini-robot's joints (the PA-10 fixed)."""
+    from experiments.pomares2011.run import pixel_interaction_matrix
+    from repro.sensors.camera import project_points
+
+    rng = np.random.default_rng(seed)
+    q = np.array(sc.Q_GOAL, dtype=float)
+    q[MINI_IDX] += rng.uniform(-0.1, 0.1, size=3)
+    P = sc.DOTS.points_world(sc.OBJECT.T_world)
+
+    def s_of(x: np.ndarray) -> np.ndarray:
+        uv, _ = project_points(sc.INTRINSICS, chain.frame_pose("mini_camera_optical", x), P)
+        return np.asarray(uv).ravel()
+
+    uv, Z = project_points(sc.INTRINSICS, chain.frame_pose("mini_camera_optical", q), P)
+    J = pixel_interaction_matrix(np.asarray(uv), np.asarray(Z)) @ chain.frame_jacobian(
+        "mini_camera_optical", q)[:, MINI_IDX]
+    h = 1e-6
+    fd = np.zeros_like(J)
+    for k, i in enumerate(MINI_IDX):
+        dq = np.zeros(len(q))
+        dq[i] = h
+        fd[:, k] = (s_of(q + dq) - s_of(q - dq)) / (2 * h)
+    assert np.abs(fd).max() > 100.0  # px/rad: the dots do move
+    np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-3)
