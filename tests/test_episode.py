@@ -421,3 +421,25 @@ def test_log_every_is_validated(tmp_path: Path, bad: object) -> None:
         Episode(scene, {"crs": TorqueDrive(robot)}, lambda o: StepResult({}), Columns(), 1.0,
                 log_every=bad)  # type: ignore[arg-type]
     scene.close()
+
+
+def test_touching_an_obstacle_is_a_collision_and_a_grasped_body_a_contact(
+        tmp_path: Path) -> None:
+    """Both boxes overlap the robot's base: the obstacle gives a ``collision`` event and
+    ``collided_*``, the body with obstacle = false a ``contact`` event and ``touched_*``."""
+    scene = _scene(tmp_path)
+    robot = scene.add_urdf("crs", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
+    robot.reset(Q0)
+    scene.add_box("wall", (0.05, 0.05, 0.05), trans(0.0, 0.0, 0.05), GREY)
+    scene.add_compound("part", [Part("box", (0.05, 0.05, 0.05))], trans(0.0, 0.0, 0.06), GREY,
+                       obstacle=False)
+
+    def ctrl(obs: Observation) -> StepResult:
+        return StepResult({"crs": robot.gravity_torques(obs.q["crs"])})
+
+    run = _run(Episode(scene, {"crs": TorqueDrive(robot)}, ctrl, Columns(), 0.01), tmp_path)
+    kinds = dict(zip(run.events["detail"].str.split().str[2], run.events["kind"], strict=True))
+    assert kinds == {"wall": "collision", "part": "contact"}, run.events
+    assert run.manifest["summary"]["collided_wall"] is True
+    assert run.manifest["summary"]["touched_part"] is True
+    assert "collided_part" not in run.manifest["summary"]

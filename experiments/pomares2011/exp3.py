@@ -287,6 +287,10 @@ class FingerMotors(JointSet):
     the ground-truth distances over ``links``: the proximal and distal links).
     """
 
+    #: what the runner's columns call one element of this set
+    element = "finger motor"
+    state_source = "93.75 (q_proximal + q_distal) of the PyBullet joint states"
+
     def __init__(self, hand: Robot, name: str = "fingers", column_prefix: str = "motor_") -> None:
         self.robot = hand
         self.world, self.body, self.client = hand.world, hand.body, hand.client
@@ -334,6 +338,7 @@ class BarrettHandDrive:
 
     mode = "motor_position"
     unit = "rad"
+    clip_to = "its motor's range 0 .. MOTOR_ANGLE_MAX (repro.sim.barrett)"
 
     def __init__(self, motors: FingerMotors, couplings: B.HandCouplings,
                  spread: float = 0.0) -> None:

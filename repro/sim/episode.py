@@ -218,14 +218,17 @@ def runner_columns(ep: Episode) -> Columns:
     cols.add("step", "-", "control step index (0-based)")
     for name, drive in ep.drives.items():
         r, pre, n = drive.robot, drive.robot.column_prefix, drive.robot.n
-        cols.add(f"{pre}q{{i}}", "rad", f"measured position of {name} joint {{i}}", n=n)
-        cols.add(f"{pre}qd{{i}}", "rad/s", f"measured velocity of {name} joint {{i}} "
-                 "(PyBullet joint state)", n=n)
-        cols.add(f"{pre}u{{i}}", drive.unit, f"{drive.mode} command of {name} joint {{i}} as "
-                 "the controller gave it (the drive applies it clipped to the joint limit)",
-                 n=n)
-        cols.add(f"{pre}n_sat", "-", f"number of {name} joints whose command the drive "
-                 f"clipped to {'tau_max' if drive.mode == 'torque' else 'qd_max'}")
+        # a joint set may be other than joints (a hand's finger motors): its own words
+        what = getattr(r, "element", "joint")
+        state = getattr(r, "state_source", "PyBullet joint state")
+        clip = getattr(drive, "clip_to", "tau_max" if drive.mode == "torque" else "qd_max")
+        cols.add(f"{pre}q{{i}}", "rad", f"measured position of {name} {what} {{i}}", n=n)
+        cols.add(f"{pre}qd{{i}}", "rad/s", f"measured velocity of {name} {what} {{i}} "
+                 f"({state})", n=n)
+        cols.add(f"{pre}u{{i}}", drive.unit, f"{drive.mode} command of {name} {what} {{i}} as "
+                 f"the controller gave it (the drive applies it clipped to {clip})", n=n)
+        cols.add(f"{pre}n_sat", "-", f"number of {name} {what}s whose command the drive "
+                 f"clipped to {clip}")
         for body in ep.scene.bodies.values():
             if body.collision and body.robot is not getattr(r, "robot", r):
                 cols.add(f"{pre}dist_{body.name}", "m", f"ground truth: minimum distance "
@@ -425,9 +428,12 @@ class _Runner:
                 row[f"{pre}dist_{body}"] = d
                 if d <= 0.0 and (name, body) not in self.collided:
                     self.collided.add((name, body))
-                    self.rec.summary[f"collided_{body}"] = True
-                    self.rec.event(t, k, "collision", f"{name} touches {body} "
-                                   f"(distance {d:.4f} m)")
+                    # an obstacle touched is a collision; a body the robot touches on purpose
+                    # (obstacle = false: a grasped object) is a contact
+                    hit = scene[body].obstacle
+                    self.rec.summary[f"{'collided' if hit else 'touched'}_{body}"] = True
+                    self.rec.event(t, k, "collision" if hit else "contact",
+                                   f"{name} touches {body} (distance {d:.4f} m)")
             obstacles = [d for b, d in dists.items()
                          if scene[b].robot is None and scene[b].obstacle]
             d_min = min(obstacles) if obstacles else float("nan")
