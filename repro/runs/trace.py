@@ -31,11 +31,13 @@ import json
 import math
 import os
 import platform
+import signal
 import socket
 import subprocess
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
@@ -353,6 +355,27 @@ def _format_cell(value: Any, key: str) -> str:
     )
 
 
+#: The signals a run is stopped by (the CLI turns them into KeyboardInterrupt): held back
+#: while the recorder's buffers and files change, so that an interrupt never lands between
+#: writing rows and forgetting them (which wrote them twice) or between buffering a row and
+#: counting it.
+_DEFERRED_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
+@contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Block SIGINT/SIGTERM in this thread for the block; a signal that arrives meanwhile is
+    delivered (and its handler runs) right after. A no-op where the OS has no signal masks."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 class TraceRecorder:
     """Writes one run's files into out_dir: trace.csv, events.csv, manifest.json, scene.json.
 
@@ -490,10 +513,10 @@ class TraceRecorder:
                     f"trace row has column(s) {', '.join(map(repr, unknown))} not in the schema "
                     f"fixed by the first row: {', '.join(self._columns)}"
                 )
-        self._pending.append(
-            [_format_cell(row[key], key) if key in row else "" for key in self._columns]
-        )
-        self._n_rows += 1
+        cells = [_format_cell(row[key], key) if key in row else "" for key in self._columns]
+        with _signals_deferred():  # a buffered row is a counted row
+            self._pending.append(cells)
+            self._n_rows += 1
         if (len(self._pending) >= self.flush_every
                 or time.perf_counter() - self._last_flush >= self.flush_interval_s):
             self.flush()
@@ -502,9 +525,10 @@ class TraceRecorder:
         """Write the buffered trace rows to disk."""
         if self._trace_file.closed:
             return
-        self._trace_writer.writerows(self._pending)
-        self._pending.clear()
-        self._trace_file.flush()
+        with _signals_deferred():  # written rows are forgotten rows: never written twice
+            self._trace_writer.writerows(self._pending)
+            self._pending.clear()
+            self._trace_file.flush()
         self._last_flush = time.perf_counter()
 
     def event(self, t: float, step: int, kind: str, detail: str = "") -> None:
