@@ -443,3 +443,29 @@ def test_touching_an_obstacle_is_a_collision_and_a_grasped_body_a_contact(
     assert run.manifest["summary"]["collided_wall"] is True
     assert run.manifest["summary"]["touched_part"] is True
     assert "collided_part" not in run.manifest["summary"]
+
+
+def test_a_dynamic_body_falls_and_its_logged_pose_follows(tmp_path: Path) -> None:
+    """Scene.add_dynamic: a free sphere dropped from 0.5 m falls under gravity (its pose
+    columns follow the simulation: z = 0.5 - g t^2 / 2 before it lands), scene.json states its
+    mass and dynamics, and an unknown dynamics keyword is refused."""
+    scene = _scene(tmp_path)
+    robot = scene.add_urdf("crs", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
+    robot.reset(Q0)
+    scene.add_dynamic("ball", Part("sphere", (0.02,)), 0.1, trans(1.0, 1.0, 0.5), GREY,
+                      {"lateralFriction": 0.8, "restitution": 0.0})
+    with pytest.raises(ConfigError, match="dynamics keyword"):
+        scene.add_dynamic("bad", Part("sphere", (0.02,)), 0.1, trans(2.0, 1.0, 0.5), GREY,
+                          {"bounciness": 1.0})
+    with pytest.raises(ConfigError, match="mass"):
+        scene.add_dynamic("bad", Part("sphere", (0.02,)), 0.0, trans(2.0, 1.0, 0.5), GREY)
+
+    def ctrl(obs: Observation) -> StepResult:
+        return StepResult({"crs": robot.gravity_torques(obs.q["crs"])})
+
+    run = _run(Episode(scene, {"crs": TorqueDrive(robot)}, ctrl, Columns(), 0.2), tmp_path)
+    t, z = run.trace["t"].to_numpy(), run.trace["ball_z"].to_numpy()
+    np.testing.assert_allclose(z, 0.5 - 9.81 * t**2 / 2, atol=2e-3)
+    ball = next(b for b in run.scene["bodies"] if b["name"] == "ball")
+    assert ball["dynamic"]["mass"] == 0.1 and ball["dynamic"]["lateralFriction"] == 0.8
+    assert ball["pose_columns"][2] == "ball_z"

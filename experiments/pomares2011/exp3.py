@@ -61,7 +61,6 @@ from repro.control.tactile_control import (
 from repro.errors import ConfigError
 from repro.geometry import inv_T, make_T, rot_y
 from repro.runs.columns import Columns
-from repro.sensors.camera import cylinder_visual_shape
 from repro.sensors.tactile import (
     BH8_PAD_NAMES,
     TactileReading,
@@ -72,7 +71,7 @@ from repro.sensors.tactile import (
 from repro.sim import barrett as B
 from repro.sim.episode import Episode, Observation, StepResult, View, run_episode
 from repro.sim.robot import JointLimits, JointSet, Robot
-from repro.sim.scene import Part, Scene, SceneBody, pose_json
+from repro.sim.scene import Part, Scene, pose_json
 from repro.sim.world import World, WorldConfig, pb_to_pose, pose_to_pb
 
 __all__ = [
@@ -468,8 +467,7 @@ class GraspAudit:
     def read(self, t: float, q: Mapping[str, np.ndarray]) -> AuditReading:
         c = self.hand.client
         pos, quat = p.getBasePositionAndOrientation(self.cyl, physicsClientId=c)
-        T_world_cyl = pb_to_pose(pos, quat)
-        self.scene[self.cylinder].T_world = T_world_cyl
+        T_world_cyl = pb_to_pose(pos, quat)  # (the Scene keeps its own copy: refresh_dynamic)
         T = self.T_palm_world @ T_world_cyl
         if self.T_ref is None and self.reference_now():
             self.T_ref = T.copy()
@@ -859,32 +857,6 @@ PRESSURE_IMAGES = {
 }
 
 
-def _add_dynamic_cylinder(scene: Scene, name: str, config: Exp3Config, T_world: np.ndarray
-                          ) -> SceneBody:
-    """The cylinder as a dynamic body (mass, friction, contact stiffness stated) recorded in
-    the scene as a moving primitive: its pose columns are logged from PyBullet every step
-    (:class:`GraspAudit`). ours: the Scene adds only static or scripted bodies."""
-    if name in scene.bodies:
-        raise ConfigError(f"the scene already has a body named {name!r}")
-    c = scene.physics.client
-    R, L = config.cylinder_radius, config.cylinder_length
-    col = p.createCollisionShape(p.GEOM_CYLINDER, radius=R, height=L, physicsClientId=c)
-    vis = cylinder_visual_shape(c, R, L, CYLINDER_RGBA)
-    pos, quat = pose_to_pb(T_world)
-    bid = p.createMultiBody(config.cylinder_mass, col, vis, pos, quat, physicsClientId=c)
-    p.changeDynamics(bid, -1, lateralFriction=config.friction,
-                     rollingFriction=config.rolling_friction,
-                     spinningFriction=config.spinning_friction,
-                     contactStiffness=config.contact_stiffness,
-                     contactDamping=config.contact_damping, restitution=0.0,
-                     physicsClientId=c)
-    body = SceneBody(name, "cylinder", np.asarray(T_world, float).copy(), CYLINDER_RGBA, True,
-                     False, [bid], [], (Part("cylinder", (R, L)),), moving=True,
-                     obstacle=False)
-    scene.bodies[name] = body
-    return body
-
-
 def build(config: Exp3Config, out_dir: Path) -> tuple[Episode, Exp3Controller]:
     """The scene (hand, cylinder, support), the drive, the sensors and the controller."""
     check_config(config)
@@ -909,7 +881,14 @@ def build(config: Exp3Config, out_dir: Path) -> tuple[Episode, Exp3Controller]:
         p.changeDynamics(hand.body, link, lateralFriction=1.0, rollingFriction=0.0,
                          spinningFriction=0.0, physicsClientId=c)
     T_world_cyl = T_WORLD_HAND @ make_T(rot_y(math.pi / 2), (0.0, 0.0, zc))
-    _add_dynamic_cylinder(scene, "cylinder", config, T_world_cyl)
+    scene.add_dynamic("cylinder", Part("cylinder", (config.cylinder_radius,
+                                                    config.cylinder_length)),
+                      config.cylinder_mass, T_world_cyl, CYLINDER_RGBA, {
+                          "lateralFriction": config.friction,
+                          "rollingFriction": config.rolling_friction,
+                          "spinningFriction": config.spinning_friction,
+                          "contactStiffness": config.contact_stiffness,
+                          "contactDamping": config.contact_damping, "restitution": 0.0})
     T_support = make_T(None, (T_world_cyl[0, 3], T_world_cyl[1, 3],
                               T_world_cyl[2, 3] - config.cylinder_radius - SUPPORT_SIZE[2] / 2))
     support = scene.add_box("support", SUPPORT_SIZE, T_support, SUPPORT_RGBA, moving=True)

@@ -477,6 +477,7 @@ class _Runner:
             row: dict[str, Scalar] = {"t": t, "step": k}
             for name, T_of_t in ep.movers.items():
                 ep.scene.move(name, T_of_t(t))
+            ep.scene.refresh_dynamic()  # free bodies: where the physics put them
             q = {name: r.q() for name, r in self.robots.items()}
             qd = {name: r.qd() for name, r in self.robots.items()}
             for name, chain in self.chains.items():

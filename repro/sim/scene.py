@@ -36,6 +36,7 @@ import pybullet as p
 import pybullet_data
 
 from repro.errors import ConfigError, UnknownChoiceError
+from repro.geometry import inv_T
 from repro.sensors.camera import (
     DotTarget,
     cylinder_visual_shape,
@@ -43,7 +44,7 @@ from repro.sensors.camera import (
     spawn_dot_target,
 )
 from repro.sim.robot import URDF_LOAD_FLAGS, JointGroup, JointLimits, JointSet, Robot
-from repro.sim.world import World, WorldConfig, pose_to_pb
+from repro.sim.world import World, WorldConfig, pb_to_pose, pose_to_pb
 
 __all__ = ["CONVENTIONS", "DISTANCE_CAP", "Part", "Scene", "SceneBody", "pose_json"]
 
@@ -51,6 +52,10 @@ SCENE_FORMAT = "repro.scene/2"
 
 #: Ground-truth distances are measured up to this range [m]; farther bodies read it.
 DISTANCE_CAP = 1.0
+#: The pybullet.changeDynamics keywords a dynamic body may set (Scene.add_dynamic).
+DYNAMICS_KEYS = frozenset({"lateralFriction", "spinningFriction", "rollingFriction",
+                           "restitution", "contactStiffness", "contactDamping",
+                           "linearDamping", "angularDamping"})
 
 CONVENTIONS = {
     "units": "metres, radians, seconds, kilograms; pixels where named px",
@@ -166,6 +171,10 @@ class SceneBody:
     info: dict[str, Any] = field(default_factory=dict)
     dot_target: DotTarget | None = None
     obstacle: bool = True  # counts in dist_min (False: a body the robot approaches on purpose)
+    #: a simulated (free) body: its mass [kg] and PyBullet dynamics (changeDynamics keywords);
+    #: None for static and scripted bodies. Its pose is read back every step
+    #: (:meth:`Scene.refresh_dynamic`).
+    dynamics: dict[str, float] | None = None
 
 
 class Scene:
@@ -377,6 +386,59 @@ class Scene:
         return self._add_parts(name, "compound", list(parts), T_world, rgba, collision,
                                render, moving, obstacle=obstacle)
 
+    def add_dynamic(self, name: str, part: Part, mass: float, T_world: np.ndarray,
+                    rgba: Sequence[float], dynamics: Mapping[str, float] | None = None,
+                    obstacle: bool = False, render: bool = False) -> SceneBody:
+        """A free body the physics moves (a grasped object): one primitive ``part`` of
+        ``mass`` [kg] at ``T_world``, with PyBullet's ``changeDynamics`` keywords
+        ``dynamics`` (friction, contact stiffness...: state them, they decide grip and slip).
+        It is a moving body (pose columns every row, read back from the simulation by
+        :meth:`refresh_dynamic`); ``obstacle=False`` by default: touching it is a contact, not
+        a collision.
+
+        Raises:
+            ConfigError: a non-positive or non-finite mass, or an unknown dynamics keyword.
+        """
+        if not (np.isfinite(mass) and mass > 0.0):
+            raise ConfigError(f"mass of the dynamic body {name!r} must be > 0 kg, got {mass}")
+        dyn = {k: float(v) for k, v in (dynamics or {}).items()}
+        unknown = sorted(set(dyn) - DYNAMICS_KEYS)
+        if unknown:
+            raise UnknownChoiceError(f"dynamics keyword of {name!r}", unknown[0],
+                                     tuple(sorted(DYNAMICS_KEYS)))
+        self._check_name(name)
+        rgba = tuple(float(c) for c in rgba)
+        T_world = np.asarray(T_world, dtype=float)
+        pos, quat = pose_to_pb(T_world @ part.T_body_part)
+        col, vis = _create_shape(self.physics.client, part, rgba, True)
+        bid = p.createMultiBody(float(mass), col, vis, pos, quat,
+                                physicsClientId=self.physics.client)  # a free body
+        if dyn:
+            p.changeDynamics(bid, -1, physicsClientId=self.physics.client, **dyn)
+        render_ids: list[int] = []
+        if render and self.mirror is not None:  # the mirror only shows it: static, no shape
+            _, vis_m = _create_shape(self.mirror.client, part, rgba, False)
+            render_ids.append(p.createMultiBody(0.0, -1, vis_m, pos, quat,
+                                                physicsClientId=self.mirror.client))
+        body = SceneBody(name, part.shape, T_world.copy(), rgba, True, bool(render_ids), [bid],
+                         render_ids, (part,), True, obstacle=obstacle,
+                         dynamics={"mass": float(mass), **dyn})
+        self.bodies[name] = body
+        return body
+
+    def refresh_dynamic(self) -> None:
+        """Read the pose of every dynamic body back from the physics (the render mirror
+        follows when something next renders)."""
+        for body in self.bodies.values():
+            if body.dynamics is None:
+                continue
+            pos, quat = p.getBasePositionAndOrientation(body.ids[0],
+                                                        physicsClientId=self.physics.client)
+            T = pb_to_pose(pos, quat) @ inv_T(body.parts[0].T_body_part)
+            body.T_world = T
+            if body.render_ids:
+                self._mirror_pending[body.name] = T.copy()
+
     def add_dot_target(self, name: str, target: DotTarget, T_world: np.ndarray,
                        moving: bool = False) -> SceneBody:
         """The coloured dots a camera measures (visual only, no collision), in both clients
@@ -491,6 +553,10 @@ class Scene:
                 d.update(b.dot_target.describe())
             if b.moving:
                 d["pose_columns"] = pose_columns(b.name)
+            if b.dynamics is not None:
+                d["dynamic"] = {**b.dynamics, "meaning": "a free body simulated with this "
+                                "mass [kg] and these pybullet.changeDynamics keywords; its pose "
+                                "is in the trace (pose_columns)"}
             bodies.append(d)
         return {
             "format": SCENE_FORMAT,
