@@ -347,32 +347,37 @@ def test_update_manifest(tmp_path: Path) -> None:
         update_manifest(tmp_path / "nope", experiment="x")
 
 
-def test_an_interrupt_during_a_flush_never_writes_rows_twice(tmp_path: Path) -> None:
-    """SIGINT arriving while the buffered rows are written (here: from inside the CSV
-    writer) is held until the buffer is cleared: the KeyboardInterrupt surfaces after the
-    flush, and the closed trace holds every recorded row once (the manifest agrees)."""
-    import os
-    import signal
-
+@pytest.mark.parametrize("when", ["before", "after"])
+def test_an_interrupt_during_a_flush_writes_every_row_once(tmp_path: Path, when: str) -> None:
+    """A KeyboardInterrupt (a signal's handler) landing just before or just after the bytes
+    of a flush reach the file: the closed trace holds every recorded row exactly once and
+    the manifest counts the rows in the file (the old recorder wrote them twice when the
+    interrupt came after the write and before the buffer was cleared)."""
     rec = _recorder(tmp_path, flush_every=10)
-    inner = rec._trace_writer
+    real = rec._trace_file
 
-    class Interrupting:
-        def writerows(self, rows):  # type: ignore[no-untyped-def]
-            out = inner.writerows(rows)
-            os.kill(os.getpid(), signal.SIGINT)  # rows written, not yet forgotten
-            return out
+    class Interrupted:  # the file, with an interrupt at the first data write
+        fired = False
 
-        def writerow(self, row):  # type: ignore[no-untyped-def]
-            return inner.writerow(row)
+        def write(self, data: bytes) -> int:
+            if self.fired or not data.startswith(b"0"):
+                return real.write(data)  # the header, or after the interrupt
+            self.fired = True
+            if when == "before":
+                raise KeyboardInterrupt("SIGINT")
+            n = real.write(data)
+            raise KeyboardInterrupt("SIGINT")
+            return n
 
-    rec._trace_writer = Interrupting()  # type: ignore[assignment]
+        def __getattr__(self, name: str) -> object:
+            return getattr(real, name)
+
+    rec._trace_file = Interrupted()  # type: ignore[assignment]
     with pytest.raises(KeyboardInterrupt):
         for k in range(25):
             rec.record({"t": float(k), "x": float(k)})
-    rec._trace_writer = inner  # type: ignore[assignment]
-    assert rec.n_rows == 10  # the interrupt surfaced from the first flush, after it
-    rec.close("interrupted", "KeyboardInterrupt")
+    assert rec.n_rows == 10
+    rec.close("interrupted", "KeyboardInterrupt: SIGINT")
     run = load_run(tmp_path)
     assert run.trace["t"].tolist() == [float(k) for k in range(10)]
-    assert run.manifest["n_rows"] == 10
+    assert run.manifest["n_rows"] == 10 and run.manifest["status"] == "interrupted"

@@ -27,17 +27,16 @@ import enum
 import functools
 import hashlib
 import importlib.metadata
+import io
 import json
 import math
 import os
 import platform
-import signal
 import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
@@ -355,25 +354,11 @@ def _format_cell(value: Any, key: str) -> str:
     )
 
 
-#: The signals a run is stopped by (the CLI turns them into KeyboardInterrupt): held back
-#: while the recorder's buffers and files change, so that an interrupt never lands between
-#: writing rows and forgetting them (which wrote them twice) or between buffering a row and
-#: counting it.
-_DEFERRED_SIGNALS = {signal.SIGINT, signal.SIGTERM}
-
-
-@contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """Block SIGINT/SIGTERM in this thread for the block; a signal that arrives meanwhile is
-    delivered (and its handler runs) right after. A no-op where the OS has no signal masks."""
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED_SIGNALS)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+def _csv_bytes(rows: list[list[str]]) -> bytes:
+    """CSV text of ``rows`` (the recorder's dialect: ',' and '\\n'), UTF-8."""
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(rows)
+    return buf.getvalue().encode("utf-8")
 
 
 class TraceRecorder:
@@ -445,10 +430,10 @@ class TraceRecorder:
         self._git_sha, self._git_dirty = git_state()
 
         self.out_dir.mkdir(parents=True, exist_ok=True)
-        self._trace_file: TextIO = open(  # closed in close()
-            self.out_dir / "trace.csv", "w", newline="", encoding="utf-8"
-        )
-        self._trace_writer = csv.writer(self._trace_file, lineterminator="\n")
+        # trace.csv is written as bytes, whole rows at a time, so that the file position
+        # tells whether a write interrupted by a signal happened (see flush and close)
+        self._trace_file = open(self.out_dir / "trace.csv", "wb")  # closed in close()
+        self._inflight: tuple[int, int, list[list[str]]] | None = None
         self._events_file: TextIO = open(  # closed in close()
             self.out_dir / "events.csv", "w", newline="", encoding="utf-8"
         )
@@ -505,7 +490,7 @@ class TraceRecorder:
                     raise ReproError(f"trace column names must be non-empty strings, got {key!r}")
             self._columns = tuple(row)
             self._column_set = frozenset(self._columns)
-            self._trace_writer.writerow(self._columns)
+            self._trace_file.write(_csv_bytes([list(self._columns)]))
         else:
             unknown = [key for key in row if key not in self._column_set]
             if unknown:
@@ -513,10 +498,10 @@ class TraceRecorder:
                     f"trace row has column(s) {', '.join(map(repr, unknown))} not in the schema "
                     f"fixed by the first row: {', '.join(self._columns)}"
                 )
-        cells = [_format_cell(row[key], key) if key in row else "" for key in self._columns]
-        with _signals_deferred():  # a buffered row is a counted row
-            self._pending.append(cells)
-            self._n_rows += 1
+        self._pending.append(
+            [_format_cell(row[key], key) if key in row else "" for key in self._columns]
+        )
+        self._n_rows += 1
         if (len(self._pending) >= self.flush_every
                 or time.perf_counter() - self._last_flush >= self.flush_interval_s):
             self.flush()
@@ -525,11 +510,38 @@ class TraceRecorder:
         """Write the buffered trace rows to disk."""
         if self._trace_file.closed:
             return
-        with _signals_deferred():  # written rows are forgotten rows: never written twice
-            self._trace_writer.writerows(self._pending)
-            self._pending.clear()
-            self._trace_file.flush()
+        rows = self._pending
+        if rows:
+            data = _csv_bytes(rows)
+            # An interrupt (KeyboardInterrupt from a signal handler) may land between any two
+            # of these lines; close() reads the file position to finish the write exactly
+            # once (_settle_inflight).
+            self._inflight = (self._trace_file.tell(), len(data), rows)
+            self._trace_file.write(data)
+            self._pending = []
+            self._inflight = None
+        self._trace_file.flush()
         self._last_flush = time.perf_counter()
+
+    def _rows_in_file(self) -> int:
+        """Data rows written to trace.csv (what the closed run holds)."""
+        if not self._trace_file.closed:
+            self._trace_file.flush()
+        return count_trace_rows(self.out_dir)
+
+    def _settle_inflight(self) -> None:
+        """After an interrupted flush: if the rows of the write in flight reached the file
+        (its position moved by their length) they must not be written again."""
+        if self._inflight is None:
+            return
+        pos0, size, rows = self._inflight
+        self._inflight = None
+        pos = self._trace_file.tell()
+        if pos == pos0 + size and self._pending is rows:
+            self._pending = []  # written, not yet forgotten
+        elif pos not in (pos0, pos0 + size):  # a partial write: drop the cut-off bytes
+            self._trace_file.seek(pos0)
+            self._trace_file.truncate()
 
     def event(self, t: float, step: int, kind: str, detail: str = "") -> None:
         """Append a row to events.csv and flush it at once.
@@ -583,7 +595,7 @@ class TraceRecorder:
             "config_hash": self._config_hash,
             "seed": self.seed,
             "columns": list(self._columns or ()),
-            "n_rows": self._n_rows,
+            "n_rows": self._rows_in_file() if ended_at is not None else self._n_rows,
             "n_events": self._n_events,
             "started_at": self._started_at,
             "ended_at": ended_at,
@@ -616,6 +628,7 @@ class TraceRecorder:
         self._closed = True
         wall_time_s = time.perf_counter() - self._t0
         try:
+            self._settle_inflight()
             self.flush()
         finally:
             self._trace_file.close()
