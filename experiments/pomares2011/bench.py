@@ -20,7 +20,7 @@ from repro.vision.pose import pose_from_points
 from repro.vision.vvs import vvs_pose
 
 N_STEPS = 1500  # ours: 1.5 s of the loop with the operator walking in (t = 9.0-10.5 s)
-T_START = 9.0  # [s] the operator is within ~0.4 m of the mini-robot from ~9.5 s
+T_START = 9.0  # ours: [s] the operator is within ~0.4 m of the mini-robot from ~9.5 s
 
 
 def _loop_timings() -> tuple[list[float], list[float], list[float]]:

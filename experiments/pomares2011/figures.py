@@ -11,6 +11,7 @@ matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
 
 from experiments.pomares2011.columns import N_POINTS  # noqa: E402
 from experiments.pomares2011.exp3_figures import make_exp3_figures  # noqa: E402
@@ -41,12 +42,12 @@ def image_trajectory(run: RunFiles, prefix: str, star_key: str, title: str) -> p
     return fig
 
 
-def _shade_active(ax: plt.Axes, df: object) -> None:
+def _shade_active(ax: plt.Axes, df: pd.DataFrame) -> None:
     """Shade the time spans where the secondary task (17) is active."""
-    if "secondary_active" not in df.columns:  # type: ignore[attr-defined]
+    if "secondary_active" not in df.columns:
         return
-    t = df["t"].to_numpy(float)  # type: ignore[index]
-    a = df["secondary_active"].fillna(False).astype(bool).to_numpy()  # type: ignore[index]
+    t = df["t"].to_numpy(float)
+    a = df["secondary_active"].fillna(False).astype(bool).to_numpy()
     edges = np.flatnonzero(np.diff(np.r_[False, a, False].astype(int)))
     for k0, k1 in zip(edges[::2], edges[1::2], strict=True):
         ax.axvspan(t[k0], t[min(k1, len(t) - 1)], color="0.85", lw=0, zorder=0)

@@ -23,6 +23,7 @@ from repro.control.hybrid_vs import (
     HybridVSController,
     distance_gradient_from_joints,
     gains_from_inertia,
+    lyapunov,
 )
 from repro.control.indirect_vs import (
     IndirectVSConfig,
@@ -49,6 +50,8 @@ N = 4  # pomares2011 Sec. 7: four image points
 #: The tracked human-robot distance this far from the distance with the true skeleton is
 #: an event [m]. ours: 2 cm, ~4 std of the largest tracking noise we try.
 TRACKING_EVENT_M = 0.02
+#: Positions of the mini-robot's joints in ALL_JOINTS (q of the whole chain).
+_MINI_IDX = np.array([ALL_JOINTS.index(j) for j in MINI_JOINTS])
 
 
 def check_config(config: Pomares2011Config) -> None:
@@ -97,7 +100,7 @@ def human_distance(chain: Robot, q: np.ndarray, tracked: list[tuple[str, Capsule
         n = mini[i][1].centre - tracked[j][1].centre
     n = n / np.linalg.norm(n)
     link = MINI_CAPSULES[i][0]
-    idx = np.array([ALL_JOINTS.index(j) for j in MINI_JOINTS])
+    idx = _MINI_IDX
     J_link = chain.frame_jacobian(link, q, "local_world_aligned")[:, idx]  # world axes
     o_link = chain.frame_pose(link, q)[:3, 3]
     J_p = J_link[:3] - skew(x_r - o_link) @ J_link[3:]  # velocity of the point x_r
@@ -160,7 +163,7 @@ class Pomares2011Controller:
     frames), or the indirect baseline. ``__call__`` is the episode runner's controller."""
 
     def __init__(self, config: Pomares2011Config, chain: Robot, arm: JointGroup,
-                 mini: JointGroup, human: HumanMotion | None = None,
+                 mini: JointGroup, human: _Bones | None = None,
                  s_u_star: np.ndarray | None = None) -> None:
         self.config, self.chain, self.arm, self.mini = config, chain, arm, mini
         #: the RVC's desired features [px]: the learning stage's (default: the paper's)
@@ -260,9 +263,7 @@ class Pomares2011Controller:
         tau = G
         if self.hybrid is not None:
             J_g = self.chain.frame_jacobian("mini_camera_optical", q)[:, self.mini.idx]
-            cfgh = self.hybrid.config
-            K_v = cfgh.K_v_active if cfgh.K_v_active is not None else cfgh.K_v
-            tau = G - K_v @ obs.qd["mini"]
+            tau = G - self.hybrid.damping(True) @ obs.qd["mini"]
             active = (hd is not None and self.config.secondary_task
                       and hd.dist < self.config.dmin)
             if active:
@@ -300,12 +301,15 @@ class Pomares2011Controller:
         G = self.mini.gravity_torques()
         hd, cols_h = self._human(q, obs.t, obs.step, events)
         use = hd if (hd is not None and self.config.secondary_task) else None
-        tau, diag = self.hybrid.step(q[self.mini.idx], obs.qd["mini"], f.uv.ravel(), L_px,
-                                     J_g, G, M, use.dist if use else None,
-                                     use.grad if use else None)
-        if self.indirect is not None:
+        if self.indirect is None:
+            tau, diag = self.hybrid.step(q[self.mini.idx], obs.qd["mini"], f.uv.ravel(), L_px,
+                                         J_g, G, M, use.dist if use else None,
+                                         use.grad if use else None)
+        else:  # the baseline has no secondary task; V (10) with the direct gain, to compare
             tau, _ = self.indirect.step(q[self.mini.idx], obs.qd["mini"], f.uv.ravel(), L_px,
                                         J_g, G, M)
+            diag = {"V": lyapunov(obs.qd["mini"], M, sc.S_STAR.ravel() - f.uv.ravel(),
+                                  self.hybrid.config.k_P), "e2": 0.0, "active": False}
         active = bool(diag["active"])
         if active != self.was_active and hd is not None:
             events.append(("secondary_task_on" if active else "secondary_task_off",
@@ -339,7 +343,8 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
     rig = CameraRig("camera", "s", Camera(sc.INTRINSICS, mode=config.camera_mode), chain,
                     "mini_camera_optical", np.eye(4), "dots", period=config.camera_period)
     learned = learn_s_u_star(scene, chain, rig)  # Sec. 5.1 step (4), before the run
-    ctrl = Pomares2011Controller(config, chain, arm, mini, human, learned.s_u_star)
+    bones = _Bones(human) if human is not None else None
+    ctrl = Pomares2011Controller(config, chain, arm, mini, bones, learned.s_u_star)
     scene.extra.update(s_star_px=sc.S_STAR, s_u_star_px=learned.s_u_star,
                        s_u_star_paper_px=sc.S_U_STAR,
                        s_u_star_learning={
@@ -355,11 +360,10 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
                                       for link, p0, p1, r in MINI_CAPSULES],
                        mini_capsules_frame="each end point in its URDF link's frame [m]")
     movers: dict[str, Callable[[float], np.ndarray]] = {}
-    if human is not None and bodies is not None:
+    if human is not None and bones is not None and bodies is not None:
         scene.extra["human"] = {"bodies": bodies.names, "stature_m": human.body.stature,
                                 "path": dataclasses.asdict(sc.HUMAN_PATH),
                                 "floor_z_m": sc.FLOOR_Z}
-        bones = _Bones(human)
         for name, _ in human.capsules(0.0):
             movers[bodies.prefix + name] = bones.pose(name)
     ep = Episode(scene, {"arm": _arm_drive(arm, config.arm_drive), "mini": TorqueDrive(mini)}, ctrl,
@@ -379,15 +383,25 @@ def _arm_drive(arm: JointGroup, kind: str) -> VelocityDrive | PositionReferenceD
 
 
 class _Bones:
-    """The human's capsules at time t, computed once per time for all the bones' movers."""
+    """The human's capsules at time t, computed once per time for the bones' movers and the
+    controller's tracker (the same call at the same t would otherwise be made 13 times)."""
 
     def __init__(self, human: HumanMotion) -> None:
-        self.human, self.t, self.caps = human, float("nan"), {}  # type: ignore[var-annotated]
+        self.human = human
+        self.t = float("nan")
+        self.list: list[tuple[str, Capsule]] = []
+        self.caps: dict[str, Capsule] = {}
+
+    def capsules(self, t: float) -> list[tuple[str, Capsule]]:
+        """:meth:`repro.sim.human.HumanMotion.capsules` at ``t`` [s], cached."""
+        if t != self.t:
+            self.t, self.list = t, self.human.capsules(t)
+            self.caps = dict(self.list)
+        return self.list
 
     def pose(self, name: str) -> Callable[[float], np.ndarray]:
         def pose(t: float) -> np.ndarray:
-            if t != self.t:
-                self.t, self.caps = t, dict(self.human.capsules(t))
+            self.capsules(t)
             return np.asarray(self.caps[name].T_world())
         return pose
 

@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from repro.sim.robot import JointLimits
 
-__all__ = ["Body", "Shape", "add_joint", "add_link", "fmt", "fmt_vec", "geometry",
+__all__ = ["Body", "Joint", "Shape", "add_joint", "add_link", "fmt", "fmt_vec", "geometry",
            "mass_properties", "principal_axes", "rpy_of", "urdf_text", "write_urdf"]
 
 
@@ -54,6 +54,22 @@ class Shape:
         radial = mass * (3.0 * r**2 + length**2) / 12.0
         axial = mass * r**2 / 2.0
         return np.diag([radial, axial, radial] if self.axis == "y" else [radial, radial, axial])
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A joint: parent -> child at ``xyz`` [m] / ``rpy`` [rad] (URDF convention).
+
+    ``axis`` None: a fixed joint; ``index``: the joint's position in the robot's limits
+    (-1: take it from elsewhere, or a fixed joint)."""
+
+    name: str
+    parent: str
+    child: str
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    axis: tuple[float, float, float] | None = None
+    index: int = -1
 
 
 @dataclass(frozen=True)

@@ -431,6 +431,11 @@ class HybridVSController:
     def __init__(self, config: HybridVSConfig) -> None:
         self.config = config
 
+    def damping(self, active: bool) -> np.ndarray:
+        """``K_v`` of (5): ``K_v_active`` while the secondary task acts (if given)."""
+        cfg = self.config
+        return cfg.K_v_active if (active and cfg.K_v_active is not None) else cfg.K_v
+
     def step(self, q: np.ndarray, qd: np.ndarray, s: np.ndarray, L_s: np.ndarray,
              J_g: np.ndarray, G: np.ndarray, M: np.ndarray, dist: float | None = None,
              grad_dist: np.ndarray | None = None, *, tau_ff: np.ndarray | None = None
@@ -474,8 +479,7 @@ class HybridVSController:
                 raise ValueError(f"dist = {dist} m < dmin = {cfg.dmin} m needs grad_dist")
             e2, de2_dr = secondary_task(dist, grad_dist, cfg.alpha, cfg.dmin)  # eq. (17)
         e = task_function(W, e1, de2_dr)  # eq. (3)
-        K_v = cfg.K_v_active if (active and cfg.K_v_active is not None) else cfg.K_v
-        tau = hybrid_torque(cfg.k_P, J_g, e, K_v, qd, G, tau_ff)  # eq. (5)
+        tau = hybrid_torque(cfg.k_P, J_g, e, self.damping(active), qd, G, tau_ff)  # eq. (5)
         V = lyapunov(qd, M, e_s, cfg.k_P)  # eq. (10)
         return tau, {"e": e, "e_s": e_s, "e1": e1, "V": V, "e2": e2, "active": active,
                      "m": W.shape[0], "rows": rows}
@@ -491,5 +495,4 @@ class HybridVSController:
         """
         cfg = self.config
         e2, de2_dr = secondary_task(dist, grad_dist, cfg.alpha, cfg.dmin)
-        K_v = cfg.K_v_active if cfg.K_v_active is not None else cfg.K_v
-        return hybrid_torque(cfg.k_P, J_g, -de2_dr, K_v, qd, G), e2
+        return hybrid_torque(cfg.k_P, J_g, -de2_dr, self.damping(True), qd, G), e2

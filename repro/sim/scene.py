@@ -153,6 +153,17 @@ def _create_shape(client: int, part: Part, rgba: Sequence[float], collision: boo
     return col, vis
 
 
+def _place(client: int, ids: Sequence[int], body: SceneBody, T_world: np.ndarray) -> None:
+    """Put the PyBullet bodies ``ids`` of ``body`` (its parts, or its dots) in ``client`` at
+    the body pose ``T_world``."""
+    if body.dot_target is not None:
+        move_dot_target(client, list(ids), body.dot_target, T_world)
+        return
+    for bid, part in zip(ids, body.parts, strict=True):
+        pos, quat = pose_to_pb(T_world @ part.T_body_part)
+        p.resetBasePositionAndOrientation(bid, pos, quat, physicsClientId=client)
+
+
 @dataclass
 class SceneBody:
     """A named body of the scene and its PyBullet ids in both clients."""
@@ -213,13 +224,7 @@ class Scene:
             return
         for name, T_world in self._mirror_pending.items():
             body = self.bodies[name]
-            if body.dot_target is not None:
-                move_dot_target(self.mirror.client, body.render_ids, body.dot_target, T_world)
-            else:
-                for bid, part in zip(body.render_ids, body.parts, strict=True):
-                    pos, quat = pose_to_pb(T_world @ part.T_body_part)
-                    p.resetBasePositionAndOrientation(bid, pos, quat,
-                                                      physicsClientId=self.mirror.client)
+            _place(self.mirror.client, body.render_ids, body, T_world)
         self._mirror_pending.clear()
 
     def close(self) -> None:
@@ -459,13 +464,7 @@ class Scene:
         if not body.moving:
             raise ConfigError(f"body {name!r} was not added with moving=True")
         T_world = np.asarray(T_world, dtype=float)
-        if body.dot_target is not None:
-            move_dot_target(self.physics.client, body.ids, body.dot_target, T_world)
-        else:
-            for bid, part in zip(body.ids, body.parts, strict=True):
-                pos, quat = pose_to_pb(T_world @ part.T_body_part)
-                p.resetBasePositionAndOrientation(bid, pos, quat,
-                                                  physicsClientId=self.physics.client)
+        _place(self.physics.client, body.ids, body, T_world)
         if body.render_ids:
             self._mirror_pending[name] = T_world.copy()
         body.T_world = T_world.copy()

@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import sys
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from repro.assets.urdf_primitives import (
     Body,
+    Joint,
     Shape,
     add_joint,
     add_link,
@@ -53,17 +53,6 @@ URDF_PATH = Path(__file__).resolve().with_name("barrett_bh8.urdf")
 _G = BH8_GEOMETRY
 HALF_PI = float(np.pi / 2)
 
-
-@dataclass(frozen=True)
-class Joint:
-    """A joint: parent -> child at ``xyz`` [m] / ``rpy`` [rad] (URDF convention)."""
-
-    name: str
-    parent: str
-    child: str
-    xyz: tuple[float, float, float]
-    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    axis: tuple[float, float, float] | None = None  # None: fixed joint
 
 
 DARK = (0.25, 0.25, 0.28, 1.0)

@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import sys
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
 from pathlib import Path
 
 from scipy.spatial.transform import Rotation
 
 from repro.assets.urdf_primitives import (
     Body,
+    Joint,
     Shape,
     add_joint,
     add_link,
@@ -40,18 +40,6 @@ URDF_PATH = Path(__file__).resolve().with_name("crs_a465.urdf")
 
 _D1, _A2, _D4, _D6 = LINK_LENGTHS
 
-
-@dataclass(frozen=True)
-class Joint:
-    """A joint: parent -> child at ``xyz`` [m] / ``rpy`` [rad] (URDF convention)."""
-
-    name: str
-    parent: str
-    child: str
-    xyz: tuple[float, float, float]
-    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    axis: tuple[int, int, int] | None = None  # None: fixed joint
-    index: int = -1  # index into CRS_LIMITS for actuated joints
 
 
 GREY = (0.75, 0.75, 0.78, 1.0)
