@@ -328,7 +328,7 @@ def test_joint_groups_of_one_urdf_have_their_own_drives_columns_and_distances(
 
     scene = _scene(tmp_path, 1e-3, 1e-3, render=True)
     chain = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS)
-    q0 = np.array([0.0, 0.3, 0.9, 0.0, 0.6, 0.0, 0.0, -0.3, 0.4])
+    q0 = np.r_[0.0, 0.3, 0.9, 0.0, 0.6, 0.0, 0.0, -0.3, 0.4, np.zeros(8)]  # + the hand
     chain.reset(q0)
     arm = scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True)
     mini = scene.add_joint_group("pa10", "mini", MINI_JOINTS, "mini_")
@@ -345,11 +345,11 @@ def test_joint_groups_of_one_urdf_have_their_own_drives_columns_and_distances(
     v = np.array([0.05, 0, 0, 0, 0, 0])
 
     def ctrl(obs: Observation) -> StepResult:
-        assert obs.q["pa10"].shape == (9,) and obs.q["mini"].shape == (3,)
+        assert obs.q["pa10"].shape == (17,) and obs.q["mini"].shape == (3,)
         # gravity compensation + a stiff joint PD: the mini-robot holds its pose while the
         # arm it sits on turns (a free joint would keep its absolute orientation instead)
         qm, qdm = obs.q["mini"], obs.qd["mini"]
-        return StepResult({"arm": v, "mini": mini.gravity_torques() + 5.0 * (q0[6:] - qm)
+        return StepResult({"arm": v, "mini": mini.gravity_torques() + 5.0 * (q0[6:9] - qm)
                            - 0.05 * qdm})
 
     run = _run(Episode(scene, {"arm": VelocityDrive(arm), "mini": TorqueDrive(mini)}, ctrl,
@@ -359,22 +359,24 @@ def test_joint_groups_of_one_urdf_have_their_own_drives_columns_and_distances(
     assert "pa10_q7" not in df and "mini_q4" not in df
     assert df["mini_dist_box"].iloc[0] < df["pa10_dist_box"].iloc[0] - 0.01  # per group
     np.testing.assert_allclose(df["pa10_q1"].iloc[-1] - q0[0], 0.05 * 0.3, atol=2e-3)
-    assert np.abs(df[["mini_q1", "mini_q2", "mini_q3"]].to_numpy() - q0[6:]).max() < 0.02
+    assert np.abs(df[["mini_q1", "mini_q2", "mini_q3"]].to_numpy() - q0[6:9]).max() < 0.02
     new = df["camera_new_frame"].to_numpy(bool)
     assert new[::5].all() and not new[1::5].any()
     held = df["s1_u"].to_numpy()
     assert np.all(held[1:5] == held[0]) and held[5] != held[0]  # held between frames
     body = json.loads((tmp_path / "scene.json").read_text())["bodies"][0]
     assert body["q_columns"] == [f"pa10_q{i}" for i in range(1, 7)] + ["mini_q1", "mini_q2",
-                                                                          "mini_q3"]
+                                                                          "mini_q3"] + [""] * 8
     assert [g["name"] for g in body["groups"]] == ["arm", "mini"]
     assert set(body["groups"][1]["links"]) == set(mini.links)
 
 
 # ----------------------------------------------------------------------------- thinned rows
-def _thinned(tmp: Path, log_every: int, duration: float = 0.1):  # type: ignore[no-untyped-def]
+def _thinned(tmp: Path, log_every: int, duration: float = 0.1,  # type: ignore[no-untyped-def]
+             extra_rows: tuple[int, ...] = ()):
     """A CRS-A465 held by gravity compensation, a box moving through a dip in its
-    distance at t = 0.0425 s (between two 10 ms rows)."""
+    distance at t = 0.0425 s (between two 10 ms rows); the controller asks for a row at the
+    steps ``extra_rows``."""
     scene = _scene(tmp)
     robot = scene.add_urdf("crs", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
     robot.reset(Q0)
@@ -384,11 +386,23 @@ def _thinned(tmp: Path, log_every: int, duration: float = 0.1):  # type: ignore[
         return trans(0.5 + 40.0 * (t - 0.0425) ** 2, 0.0, 0.3)
 
     def ctrl(obs: Observation) -> StepResult:
-        return StepResult({"crs": robot.gravity_torques(obs.q["crs"])})
+        return StepResult({"crs": robot.gravity_torques(obs.q["crs"])},
+                          log_row=obs.step in extra_rows)
 
     ep = Episode(scene, {"crs": TorqueDrive(robot)}, ctrl, Columns(), duration,
                  movers={"box": box}, log_every=log_every)
     return _run(ep, tmp)
+
+
+def test_controller_asks_for_rows_between_log_every_rows(tmp_path: Path) -> None:
+    """StepResult.log_row: the steps the controller marks are rows too (a 30 Hz tick in a
+    100 Hz log), and they are the full trace's rows at those steps."""
+    full = _thinned(tmp_path / "full", 1)
+    thin = _thinned(tmp_path / "thin", 10, extra_rows=(33, 66, 70))
+    steps = sorted({*range(0, 101, 10), 33, 66})
+    np.testing.assert_array_equal(thin.trace["step"], steps)
+    merged = full.trace.set_index("step").loc[steps]
+    np.testing.assert_array_equal(merged["q1"].to_numpy(), thin.trace["q1"].to_numpy())
 
 
 def test_log_every_thins_rows_but_not_the_loop(tmp_path: Path) -> None:

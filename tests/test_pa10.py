@@ -1,11 +1,12 @@
-"""Tests of the pomares2011 robot chain (repro/assets/pa10, repro.sim.pa10): PA-10 + Barrett
-hand placeholder + RRR mini-robot with its camera, one URDF, one Robot of nine joints.
+"""Tests of the pomares2011 robot chain (repro/assets/pa10, repro.sim.pa10): PA-10 + the
+Barrett BH8-282 (repro/assets/barrett_bh8) + RRR mini-robot with its camera, one URDF, one
+Robot of 17 joints.
 
 Published figures are written here as literals (not read back from the module), so a wrong
 constant in the module or the URDF fails: ARTE's DH table (d 0.315/0/0/0.50/0/0.08,
 a 0/0.45/0/0/0/0, alpha 90/0/90/-90/90/0 deg, offsets +90 deg on joints 2-3), limits
 +-177/91/137/255/165/360 deg and speeds 200/200/260/360/360/450 deg/s, the manufacturer's
-link masses, and the BH8-282 masses (base 0.60 kg, finger 0.179 kg) and palm plate.
+link masses, and the BH8-282 masses (base 0.60 kg, finger 0.179 kg) and palm height.
 """
 
 from __future__ import annotations
@@ -21,11 +22,12 @@ from asset_scripts import import_script
 
 from repro.assets.urdf_primitives import mass_properties
 from repro.errors import ConfigError
+from repro.sim import barrett as B
 from repro.sim.drives import TorqueDrive
 from repro.sim.pa10 import (
     ALL_JOINTS,
     ALL_LIMITS,
-    BARRETT_PLACEHOLDER,
+    HAND_JOINTS,
     MINI_GEOMETRY,
     MINI_JOINTS,
     MINI_LIMITS,
@@ -33,6 +35,7 @@ from repro.sim.pa10 import (
     PA10_DH,
     PA10_JOINTS,
     PA10_LIMITS,
+    PALM_HEIGHT,
     pa10_dh_fk,
     pa10_dh_frames,
     pa10_urdf_path,
@@ -45,12 +48,32 @@ QD_MAX_DEG_S = np.array([200.0, 200.0, 260.0, 360.0, 360.0, 450.0])
 # 7-DoF manufacturer masses mapped to the 6-DoF links (README): base, 1, 2 = 8.41 + 3.51, ...
 PA10_MASSES = {"pa10_link0": 3.04, "pa10_link1": 9.78, "pa10_link2": 11.92,
                "pa10_link3": 4.31, "pa10_link4": 3.45, "pa10_link5": 1.46, "pa10_link6": 0.24}
-FINGER_LINKS = tuple(f"hand_finger{k}_{part}" for k in (1, 2, 3)
-                     for part in ("proximal", "distal"))
-HAND_LINKS = ("hand_base",) + FINGER_LINKS
+FINGER_LINKS = tuple(f"bh8_finger{k}_{part}" for k in (1, 2, 3)
+                     for part in ("knuckle", "proximal", "distal"))
+HAND_LINKS = ("bh8_base", "bh8_palm") + FINGER_LINKS
 MINI_BODY_LINKS = ("mini_base", "mini_link1", "mini_link2", "mini_link3", "mini_camera")
 BODY_LINKS = tuple(PA10_MASSES) + HAND_LINKS + MINI_BODY_LINKS
-FRAME_LINKS = ("pa10_flange", "hand_palm", "mini_camera_optical")
+FRAME_LINKS = ("pa10_flange", "mini_camera_optical") + B.BH8_PAD_FRAMES + B.BH8_TIP_FRAMES
+N_JOINTS = 17
+
+
+def _hand(proximal_deg: float) -> np.ndarray:
+    """(8,) hand joints: spread 0, every finger's motor at 125 x ``proximal_deg`` (engaged)."""
+    q = np.zeros(len(HAND_JOINTS))
+    for k in (1, 2, 3):
+        q_p, q_d = B.finger_joints_from_motor(B.J2_RATIO * np.deg2rad(proximal_deg))
+        q[HAND_JOINTS.index(f"bh8_finger{k}_proximal_joint")] = q_p
+        q[HAND_JOINTS.index(f"bh8_finger{k}_distal_joint")] = q_d
+    return q
+
+
+#: The hand half open (the approach pose of pomares2011 experiments 1-2).
+HALF_OPEN = _hand(60.0)
+
+
+def _q(arm_mini: np.ndarray | list[float], hand: np.ndarray = HALF_OPEN) -> np.ndarray:
+    """(17,) ALL_JOINTS order: 9 arm + mini-robot joints, then the hand."""
+    return np.r_[np.asarray(arm_mini, dtype=float), hand]
 ALL_LINKS = BODY_LINKS + FRAME_LINKS
 PHYSICS_1KHZ = WorldConfig(physics_dt=1e-3, control_dt=1e-3)
 
@@ -82,14 +105,15 @@ def _rel(robot: Robot, a: str, b: str, q: np.ndarray) -> np.ndarray:
 
 
 def test_loads_in_pybullet_and_pinocchio(robot: Robot) -> None:
-    assert ALL_JOINTS == PA10_JOINTS + MINI_JOINTS
+    assert ALL_JOINTS == PA10_JOINTS + MINI_JOINTS + B.BH8_JOINTS
+    assert HAND_JOINTS == B.BH8_JOINTS
     assert PA10_JOINTS == tuple(f"pa10_joint{i}" for i in range(1, 7))
     assert MINI_JOINTS == ("mini_joint1", "mini_joint2", "mini_joint3")
-    assert robot.n == 9 and robot.model.nq == robot.model.nv == 9
+    assert robot.n == N_JOINTS and robot.model.nq == robot.model.nv == N_JOINTS
     movable = [j for j in range(p.getNumJoints(robot.body, physicsClientId=robot.client))
                if p.getJointInfo(robot.body, j, physicsClientId=robot.client)[2]
                != p.JOINT_FIXED]
-    assert len(movable) == 9
+    assert len(movable) == N_JOINTS
     for j in movable:
         assert p.getJointInfo(robot.body, j, physicsClientId=robot.client)[2] == p.JOINT_REVOLUTE
     assert p.getBodyInfo(robot.body, physicsClientId=robot.client)[0].decode() == "pa10_link0"
@@ -97,9 +121,10 @@ def test_loads_in_pybullet_and_pinocchio(robot: Robot) -> None:
         assert " " not in link
         robot.frame_id(link)  # raises if pinocchio lacks it
         robot.pb_link_index(link)  # raises if PyBullet lacks it
-    # A second, independent pinocchio parse (not through Robot): the tree order is ours.
+    # A second, independent pinocchio parse (not through Robot): the same joints (pinocchio
+    # orders the flange's two subtrees by its own rule; Robot maps them by name).
     model = pin.buildModelFromUrdf(str(pa10_urdf_path()))
-    assert [model.names[i] for i in range(1, model.njoints)] == list(ALL_JOINTS)
+    assert sorted(model.names[i] for i in range(1, model.njoints)) == sorted(ALL_JOINTS)
 
 
 def test_no_joint_damping_or_friction(robot: Robot) -> None:
@@ -135,15 +160,15 @@ def test_upright_at_zero_and_tilt_sign(robot: Robot) -> None:
     expected = np.diag([-1.0, -1.0, 1.0, 1.0])
     expected[2, 3] = 1.345
     np.testing.assert_allclose(pa10_dh_fk(np.zeros(6)), expected, atol=1e-15)
-    np.testing.assert_allclose(robot.frame_pose("pa10_flange", np.zeros(9)), expected,
+    np.testing.assert_allclose(robot.frame_pose("pa10_flange", np.zeros(N_JOINTS)), expected,
                                atol=1e-9)
-    q = np.zeros(9)
+    q = np.zeros(N_JOINTS)
     q[1] = 0.1
     T = robot.frame_pose("pa10_flange", q)
     assert T[0, 3] == pytest.approx(-(0.45 + 0.50 + 0.08) * np.sin(0.1), abs=1e-12)
     assert T[2, 3] == pytest.approx(0.315 + (0.45 + 0.50 + 0.08) * np.cos(0.1), abs=1e-12)
     # q3 = -90 deg: the forearm horizontal, the flange 0.45 up and 0.58 out along +x.
-    q = np.zeros(9)
+    q = np.zeros(N_JOINTS)
     q[2] = -np.pi / 2
     np.testing.assert_allclose(robot.frame_pose("pa10_flange", q)[:3, 3],
                                [0.58, 0.0, 0.765], atol=1e-12)
@@ -153,7 +178,7 @@ def test_urdf_fk_equals_dh_table(robot: Robot) -> None:
     """pinocchio's pa10_flange equals the DH flange pose to 1e-9 at random q (whatever the
     mini-robot does), and every PA-10 joint turns about the DH axis z_{i-1}."""
     rng = np.random.default_rng(1)
-    for q in [np.zeros(9)] + [_random_q(rng) for _ in range(20)]:
+    for q in [np.zeros(N_JOINTS)] + [_random_q(rng) for _ in range(20)]:
         np.testing.assert_allclose(robot.frame_pose("pa10_flange", q), pa10_dh_fk(q[:6]),
                                    atol=1e-9)
         frames = pa10_dh_frames(q[:6])
@@ -181,45 +206,53 @@ def test_pinocchio_matches_pybullet(robot: Robot) -> None:
 
 
 # --------------------------------------------------------------------------------------
-# Hand placeholder, mini-robot, camera
+# Hand, mini-robot, camera
 # --------------------------------------------------------------------------------------
 
 
-def test_hand_placeholder_on_flange(robot: Robot) -> None:
-    """hand_base on the flange, hand_palm 78 mm out on its axis, fingers half open: all six
-    phalanges rise above the palm, the tips of finger 3 and of fingers 1-2 face each other
-    across the hand axis, 0.08-0.14 m apart."""
+def test_hand_on_flange(robot: Robot) -> None:
+    """The BH8-282 on the flange: bh8_base = pa10_flange, bh8_palm 79 mm out on its axis,
+    and every hand frame relative to bh8_base is Barrett's DH frame of the standalone hand
+    (repro.sim.barrett.bh8_dh_frames) at random hand joints, whatever the arm does."""
     rng = np.random.default_rng(5)
-    q = _random_q(rng)
-    np.testing.assert_allclose(_rel(robot, "pa10_flange", "hand_base", q), np.eye(4),
-                               atol=1e-12)
-    T_fp = _rel(robot, "pa10_flange", "hand_palm", q)
-    np.testing.assert_allclose(T_fp[:3, :3], np.eye(3), atol=1e-12)
-    np.testing.assert_allclose(T_fp[:3, 3], [0.0, 0.0, 0.078], atol=1e-12)
-    assert BARRETT_PLACEHOLDER.palm_height == pytest.approx(0.078)
-    palm = [s for s in p.getCollisionShapeData(robot.body, robot.pb_link_index("hand_base"),
-                                               physicsClientId=robot.client)
-            if s[2] == p.GEOM_BOX and np.allclose(s[3], [0.076, 0.046, 0.012], atol=1e-9)]
-    assert len(palm) == 1
-    tips = {}
+    for _ in range(5):
+        q = _random_q(rng)
+        np.testing.assert_allclose(_rel(robot, "pa10_flange", "bh8_base", q), np.eye(4),
+                                   atol=1e-12)
+        T_fp = _rel(robot, "pa10_flange", "bh8_palm", q)
+        np.testing.assert_allclose(T_fp[:3, :3], np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(T_fp[:3, 3], [0.0, 0.0, 0.079], atol=1e-12)
+        qh = dict(zip(ALL_JOINTS, q, strict=True))
+        for k in (1, 2, 3):
+            spread = qh["bh8_finger1_spread"] if k == 1 else qh["bh8_finger2_spread"]
+            frames = B.bh8_dh_frames(k, spread if k != 3 else 0.0,
+                                     qh[f"bh8_finger{k}_proximal_joint"],
+                                     qh[f"bh8_finger{k}_distal_joint"])
+            for name, T_dh in zip(("knuckle", "proximal", "distal", "tip"), frames,
+                                  strict=True):
+                link = f"bh8_finger{k}_{name}"
+                np.testing.assert_allclose(_rel(robot, "bh8_base", link, q), T_dh, atol=1e-9,
+                                           err_msg=link)
+    assert PALM_HEIGHT == pytest.approx(0.079)
+
+
+def test_half_open_hand_clears_the_camera_view(robot: Robot) -> None:
+    """The approach pose (every finger half open) keeps all nine phalanges and knuckles
+    below the optical centre at q = 0, the tips of finger 3 and of fingers 1-2 on either
+    side of the hand axis."""
+    q = _q(np.zeros(9))
+    T_fc = _rel(robot, "pa10_flange", "mini_camera_optical", q)
     for k in (1, 2, 3):
-        for part in ("proximal", "distal"):
-            T = _rel(robot, "hand_palm", f"hand_finger{k}_{part}", q)
-            length = 0.070 if part == "proximal" else 0.055
-            end = T @ np.array([length, 0.0, 0.0, 1.0])
-            assert end[2] > 0.02, (k, part)  # above the palm
-            tips[k] = end[:3]
-    assert tips[3][1] > 0.0 and tips[1][1] < 0.0 and tips[2][1] < 0.0
-    for k in (1, 2):
-        assert 0.08 < tips[3][1] - tips[k][1] < 0.14
-        assert tips[k][0] == pytest.approx(-0.025 if k == 1 else 0.025, abs=1e-9)
+        tip = _rel(robot, "bh8_palm", f"bh8_finger{k}_tip", q)[:3, 3]
+        assert (tip[1] > 0.03) if k == 3 else (tip[1] < -0.03), (k, tip)
+        assert 0.0 < _rel(robot, "pa10_flange", f"bh8_finger{k}_tip", q)[2, 3] < T_fc[2, 3] - 0.05
 
 
 def test_camera_looks_forward_at_zero(robot: Robot) -> None:
     """Stated property: at q = 0 the optical axis (z) is the flange +z, the optical centre
     0.13 m off the hand axis (flange +x) and 0.25 m out, ahead of the fingertips; image y
     points away from the hand axis; nothing of the robot is in front of the lens."""
-    q0 = np.zeros(9)
+    q0 = _q(np.zeros(9))
     T = _rel(robot, "pa10_flange", "mini_camera_optical", q0)
     # 1e-10: the URDF writes angles to 12 significant digits.
     np.testing.assert_allclose(T[:3, :3], [[0, 1, 0], [-1, 0, 0], [0, 0, 1]], atol=1e-10)
@@ -251,16 +284,16 @@ def test_camera_can_look_at_object_ahead_of_hand(robot: Robot, ahead: float) -> 
     g = MINI_GEOMETRY
     for q1, q2 in itertools.product((-2.5, -1.0, 0.0, 1.6, 3.0), (-0.6, -0.3, 0.0)):
         # The PA-10 reaching forward, its forearm horizontal, random rolls and base turn.
-        q = np.zeros(9)
+        q = _q(np.zeros(9))
         q[[0, 3, 5]] = rng.uniform(-3.0, 3.0, 3)
         q[2] = -np.pi / 2
         q[6], q[7] = q1, q2
         r3 = g.radius - g.link2 * np.sin(q2)
         z3 = g.joint2_height + g.link2 * np.cos(q2)
-        z_obj = BARRETT_PLACEHOLDER.palm_height + ahead
+        z_obj = PALM_HEIGHT + ahead
         q[8] = np.arctan2(r3, z_obj - z3) - q2
         assert MINI_LIMITS.q_min[2] < q[8] < MINI_LIMITS.q_max[2]
-        P_world = robot.frame_pose("hand_palm", q) @ np.array([0.0, 0.0, ahead, 1.0])
+        P_world = robot.frame_pose("bh8_palm", q) @ np.array([0.0, 0.0, ahead, 1.0])
         P_cam = np.linalg.inv(robot.frame_pose("mini_camera_optical", q)) @ P_world
         np.testing.assert_allclose(P_cam[:2] / P_cam[2], 0.0, atol=1e-9)
         assert P_cam[2] > (0.14 if q2 == -0.6 else 0.08)  # depth [m]
@@ -271,10 +304,12 @@ def test_camera_can_look_at_object_ahead_of_hand(robot: Robot, ahead: float) -> 
         assert hit[0] == -1, (q1, q2, hit)
 
 
-def test_mini_robot_clears_hand(robot: Robot) -> None:
-    """Turning around the task (q1, q2 = q3 = 0) the mini-robot stays >= 1 cm from the hand."""
+@pytest.mark.parametrize("proximal_deg", [60.0, 100.0, 140.0])
+def test_mini_robot_clears_hand(robot: Robot, proximal_deg: float) -> None:
+    """Turning around the task (q1, q2 = q3 = 0) the mini-robot stays >= 1 cm from the hand,
+    its fingers from the approach pose (60 deg) to fully closed."""
     for q1 in np.linspace(-np.pi, np.pi, 25):
-        q = np.zeros(9)
+        q = _q(np.zeros(9), _hand(proximal_deg))
         q[6] = q1
         robot.reset(q)
         for a, b in itertools.product(MINI_BODY_LINKS[1:], HAND_LINKS):
@@ -316,20 +351,23 @@ def test_limits(robot: Robot) -> None:
     np.testing.assert_allclose(PA10_LIMITS.qd_max, np.deg2rad(QD_MAX_DEG_S), rtol=1e-15)
     for field in ("q_min", "q_max", "qd_max", "tau_max"):
         assert getattr(ALL_LIMITS, field) == (getattr(PA10_LIMITS, field)
-                                              + getattr(MINI_LIMITS, field))
+                                              + getattr(MINI_LIMITS, field)
+                                              + getattr(B.BH8_LIMITS, field))
     assert np.all(np.asarray(ALL_LIMITS.tau_max) > 0)
     # The URDF, as PyBullet and pinocchio read it, has the same limits.
-    for k in range(9):
+    for k in range(N_JOINTS):
         info = p.getJointInfo(robot.body, robot.pb_joints[k], physicsClientId=robot.client)
         lower, upper, force, velocity = info[8], info[9], info[10], info[11]
         assert (lower, upper) == pytest.approx((ALL_LIMITS.q_min[k], ALL_LIMITS.q_max[k]),
                                                abs=1e-9)
         assert velocity == pytest.approx(ALL_LIMITS.qd_max[k], abs=1e-9)
         assert force == pytest.approx(ALL_LIMITS.tau_max[k], abs=1e-9)
-    np.testing.assert_allclose(robot.model.lowerPositionLimit, ALL_LIMITS.q_min, atol=1e-9)
-    np.testing.assert_allclose(robot.model.upperPositionLimit, ALL_LIMITS.q_max, atol=1e-9)
-    np.testing.assert_allclose(robot.model.velocityLimit, ALL_LIMITS.qd_max, atol=1e-9)
-    np.testing.assert_allclose(robot.model.effortLimit, ALL_LIMITS.tau_max, atol=1e-9)
+    m = robot.model
+    idx = [m.joints[m.getJointId(n)].idx_q for n in ALL_JOINTS]  # pinocchio's own order
+    np.testing.assert_allclose(m.lowerPositionLimit[idx], ALL_LIMITS.q_min, atol=1e-9)
+    np.testing.assert_allclose(m.upperPositionLimit[idx], ALL_LIMITS.q_max, atol=1e-9)
+    np.testing.assert_allclose(m.velocityLimit[idx], ALL_LIMITS.qd_max, atol=1e-9)
+    np.testing.assert_allclose(m.effortLimit[idx], ALL_LIMITS.tau_max, atol=1e-9)
 
 
 def test_mass_properties(robot: Robot) -> None:
@@ -365,9 +403,10 @@ def test_mass_properties(robot: Robot) -> None:
         assert _rot_err(R_file, R_pb) < 1e-6, name
     for name, m in PA10_MASSES.items():
         assert masses[name] == pytest.approx(m, abs=1e-12), name
-    assert masses["hand_base"] == 0.60
+    assert masses["bh8_base"] + masses["bh8_palm"] == pytest.approx(0.60, abs=1e-12)
     for k in (1, 2, 3):
-        finger = masses[f"hand_finger{k}_proximal"] + masses[f"hand_finger{k}_distal"]
+        finger = sum(masses[f"bh8_finger{k}_{part}"] for part in ("knuckle", "proximal",
+                                                                  "distal"))
         assert finger == pytest.approx(0.179, abs=1e-12)
     for name, m in MINI_MASSES.items():
         assert masses[name] == m
@@ -394,18 +433,18 @@ def test_gravity_compensation_holds_and_zero_torque_falls() -> None:
     """At 1 kHz with TorqueDrive (torques clipped to tau_max), g(q) from pinocchio holds the
     nine-joint chain still for 1 s in a generic and in the stretched-out pose; zero torque
     lets the same chain fall."""
-    poses = (np.array([0.3, 0.6, 0.4, 0.2, 0.7, 0.1, 0.5, 0.4, -0.3]),
-             np.array([0.0, 0.99 * np.pi / 2, 0.0, 0.0, 0.0, 0.0, np.pi / 2, 0.0, 0.0]))
+    poses = (_q([0.3, 0.6, 0.4, 0.2, 0.7, 0.1, 0.5, 0.4, -0.3]),
+             _q([0.0, 0.99 * np.pi / 2, 0.0, 0.0, 0.0, 0.0, np.pi / 2, 0.0, 0.0]))
     for q0, compensate in itertools.product(poses, (True, False)):
         with World(PHYSICS_1KHZ) as world:
             robot = Robot(world, pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS)
             robot.reset(q0)
             drive = TorqueDrive(robot)
-            z0 = robot.frame_pose("hand_palm", q0)[2, 3]
+            z0 = robot.frame_pose("bh8_palm", q0)[2, 3]
             T_fc0 = _rel(robot, "pa10_flange", "mini_camera_optical", q0)
             h = world.config.physics_dt
             for _ in range(1000):
-                tau = robot.gravity_torques(robot.q()) if compensate else np.zeros(9)
+                tau = robot.gravity_torques(robot.q()) if compensate else np.zeros(N_JOINTS)
                 drive.command(tau, h)
                 drive.substep(1, h)
                 world.step_physics()
@@ -414,7 +453,7 @@ def test_gravity_compensation_holds_and_zero_torque_falls() -> None:
                 np.testing.assert_allclose(q, q0, atol=1e-4)
                 np.testing.assert_allclose(robot.qd(), 0.0, atol=1e-3)
             else:
-                assert robot.frame_pose("hand_palm", q)[2, 3] < z0 - 0.05  # the arm falls
+                assert robot.frame_pose("bh8_palm", q)[2, 3] < z0 - 0.05  # the arm falls
                 T_fc = _rel(robot, "pa10_flange", "mini_camera_optical", q)
                 assert np.linalg.norm(T_fc[:3, 3] - T_fc0[:3, 3]) > 0.02  # and the mini
 
@@ -424,22 +463,22 @@ def test_torque_limits_hold_worst_gravity_pose(robot: Robot) -> None:
     static load stays under tau_max, with room for the PA-10's 10 kg rated payload at the
     palm on the arm joints (>= 10 % left) and >= 2x margin on the mini-robot."""
     tau_max = np.asarray(ALL_LIMITS.tau_max)
-    worst_self = np.zeros(9)
-    worst_total = np.zeros(9)
+    worst_self = np.zeros(N_JOINTS)
+    worst_total = np.zeros(N_JOINTS)
     grid = itertools.product((np.pi / 2, -np.pi / 2), np.linspace(-np.pi, np.pi, 7),
                              np.linspace(-np.pi / 2, np.pi / 2, 5),
                              np.linspace(-np.pi, np.pi, 9), np.linspace(-1.5, 1.5, 5),
                              np.linspace(-1.5, 1.5, 5))
     for q2, q4, q5, m1, m2, m3 in grid:
-        q = np.array([0.0, q2, 0.0, q4, q5, 0.0, m1, m2, m3])
+        q = _q([0.0, q2, 0.0, q4, q5, 0.0, m1, m2, m3])
         g = np.abs(robot.gravity_torques(q))
-        J = robot.frame_jacobian("hand_palm", q, "local_world_aligned")[:3]
+        J = robot.frame_jacobian("bh8_palm", q, "local_world_aligned")[:3]
         payload = np.abs(J.T @ np.array([0.0, 0.0, 10.0 * 9.81]))  # 10 kg at the palm
         worst_self = np.maximum(worst_self, g)
         worst_total = np.maximum(worst_total, g + payload)
     assert worst_self[1] > 100.0 and worst_self[2] > 30.0  # the shoulder does carry the arm
     assert np.all(worst_total[:6] < 0.9 * tau_max[:6])
-    assert np.all(worst_self[6:] < 0.5 * tau_max[6:])
+    assert np.all(worst_self[6:9] < 0.5 * tau_max[6:9])
     assert worst_self[6] > 0.5  # q1 carries the mini-robot when the flange is horizontal
 
 

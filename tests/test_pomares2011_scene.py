@@ -18,7 +18,7 @@ import pytest
 from repro.control.rvc import learn_desired_features, rvc_features
 from repro.errors import ConfigError
 from repro.sensors.camera import Camera, disc_image_centroids, project_points
-from repro.sim.pa10 import ALL_LIMITS
+from repro.sim.pa10 import ALL_LIMITS, HAND_JOINTS
 from repro.sim.robot import Robot, solve_ik
 from repro.sim.scene import Scene
 from repro.sim.world import WorldConfig
@@ -103,11 +103,21 @@ def test_start_every_dot_found_and_away_from_goal(scene_robot: tuple[Scene, Robo
 
 @pytest.mark.parametrize("which", ["goal", "start"])
 def test_configurations_within_limits(which: str) -> None:
+    """The arm and the mini-robot >= 5 deg inside their limits; the hand (spread 0 is its
+    lower limit) at the approach pose: engaged, distal = proximal / 3, half open."""
     q = CONFIGS[which]
-    assert q.shape == (9,)
+    assert q.shape == (17,)
     margin = 5.0 * S.DEG
-    assert np.all(q > np.asarray(ALL_LIMITS.q_min) + margin)
-    assert np.all(q < np.asarray(ALL_LIMITS.q_max) - margin)
+    assert np.all(q[:9] > np.asarray(ALL_LIMITS.q_min[:9]) + margin)
+    assert np.all(q[:9] < np.asarray(ALL_LIMITS.q_max[:9]) - margin)
+    assert np.all(q[9:] >= np.asarray(ALL_LIMITS.q_min[9:]))
+    assert np.all(q[9:] <= np.asarray(ALL_LIMITS.q_max[9:]))
+    np.testing.assert_array_equal(q[9:], S.Q_HAND)
+    for k in (1, 2, 3):
+        q_p = S.Q_HAND[HAND_JOINTS.index(f"bh8_finger{k}_proximal_joint")]
+        q_d = S.Q_HAND[HAND_JOINTS.index(f"bh8_finger{k}_distal_joint")]
+        assert q_p == pytest.approx(np.deg2rad(60.0), abs=1e-12)
+        assert q_d == pytest.approx(q_p / 3.0, abs=1e-12)
 
 
 @pytest.mark.parametrize("which", ["goal", "start"])
@@ -146,17 +156,18 @@ def test_pa10_configuration_is_the_ik_solution(scene_robot: tuple[Scene, Robot],
     np.testing.assert_allclose(robot.frame_pose("pa10_flange", q), T_target, atol=1e-6)
     q_ik = solve_ik(robot, "pa10_flange", T_target, seed)
     np.testing.assert_allclose(q_ik[:6], q[:6], atol=1e-6)
+    np.testing.assert_array_equal(q_ik[6:], seed[6:])  # the flange does not depend on them
 
 
 def test_goal_is_ready_to_grasp(scene_robot: tuple[Scene, Robot]) -> None:
     """At the goal the hand axis points straight down through the top-face centre, the palm
     0.24 m above it (fingertips well clear)."""
     _, robot = scene_robot
-    T_wp = robot.frame_pose("hand_palm", S.Q_GOAL)
+    T_wp = robot.frame_pose("bh8_palm", S.Q_GOAL)
     top = S.OBJECT.T_world @ np.array([0.0, 0.0, S.OBJECT.top_z, 1.0])
     np.testing.assert_allclose(T_wp[:3, 2], [0.0, 0.0, -1.0], atol=1e-9)
     np.testing.assert_allclose(T_wp[:2, 3], top[:2], atol=1e-6)
-    assert T_wp[2, 3] - top[2] == pytest.approx(S.GOAL_STANDOFF - 0.078, abs=1e-6)
+    assert T_wp[2, 3] - top[2] == pytest.approx(S.GOAL_STANDOFF - 0.079, abs=1e-6)
 
 
 def test_model_geometry_is_sane() -> None:

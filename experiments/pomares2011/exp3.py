@@ -50,6 +50,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import pybullet as p
 
+from experiments.pomares2011.columns import declare_hand_joint_columns, hand_joint_values
 from repro.config import param, validate
 from repro.control.tactile_control import (
     LOG_FIELDS,
@@ -69,8 +70,9 @@ from repro.sensors.tactile import (
     mount_pads,
 )
 from repro.sim import barrett as B
+from repro.sim.barrett import BarrettHandDrive, FingerMotors
 from repro.sim.episode import Episode, Observation, StepResult, View, run_episode
-from repro.sim.robot import JointLimits, JointSet, Robot
+from repro.sim.robot import Robot
 from repro.sim.scene import Part, Scene, pose_json
 from repro.sim.world import World, WorldConfig, pb_to_pose, pose_to_pb
 
@@ -275,102 +277,6 @@ def plan_contact_motor_angles(radius: float, length: float, z_centre: float,
     return out
 
 
-# ============================================================================ the drive
-class FingerMotors(JointSet):
-    """The three finger motors of a loaded BH8 body as a joint set (the runner logs them as
-    ``<prefix>q{i}``, ``qd{i}``, ``u{i}``): position = the motor angle [rad] of finger i,
-    ``93.75 (q_proximal + q_distal)`` of the simulated joints (the distal gear sits on the
-    motor shaft: valid before and after breakaway), velocity its rate [rad/s].
-
-    ``robot`` is the whole hand (the runner then also observes its eight joints, and measures
-    the ground-truth distances over ``links``: the proximal and distal links).
-    """
-
-    #: what the runner's columns call one element of this set
-    element = "finger motor"
-    state_source = "93.75 (q_proximal + q_distal) of the PyBullet joint states"
-
-    def __init__(self, hand: Robot, name: str = "fingers", column_prefix: str = "motor_") -> None:
-        self.robot = hand
-        self.world, self.body, self.client = hand.world, hand.body, hand.client
-        self.name, self.column_prefix = name, column_prefix
-        idx = B.bh8_joint_indices(hand.body, hand.client)
-        self._pairs = [(idx[f"bh8_finger{k}_proximal_joint"], idx[f"bh8_finger{k}_distal_joint"])
-                       for k in FINGERS]
-        self.pb_joints = [a for a, _ in self._pairs]
-        self.n = N_FINGERS
-        k_p = B.BH8_JOINTS.index("bh8_finger1_proximal_joint")
-        self.limits = JointLimits(q_min=(0.0,) * 3, q_max=(B.MOTOR_ANGLE_MAX,) * 3,
-                                  qd_max=(B.MOTOR_SPEED_MAX,) * 3,
-                                  tau_max=(B.BH8_LIMITS.tau_max[k_p],) * 3)
-        names = {f"bh8_finger{k}_{part}" for k in FINGERS for part in ("proximal", "distal")}
-        self.links = sorted(idx[n] for n in names)
-
-    def _states(self) -> list[tuple[Any, ...]]:
-        return list(p.getJointStates(self.body, [j for pair in self._pairs for j in pair],
-                                     physicsClientId=self.client))
-
-    def q(self) -> np.ndarray:
-        s = self._states()
-        return np.array([B.DISTAL_RATIO * (s[2 * i][0] + s[2 * i + 1][0]) for i in range(3)])
-
-    def qd(self) -> np.ndarray:
-        s = self._states()
-        return np.array([B.DISTAL_RATIO * (s[2 * i][1] + s[2 * i + 1][1]) for i in range(3)])
-
-    def gravity_torques(self, q: np.ndarray) -> np.ndarray:
-        return np.zeros(self.n)
-
-
-class BarrettHandDrive:
-    """The hand's three finger motors (the Drive protocol of :mod:`repro.sim.drives`).
-
-    Command: one motor angle target per finger [rad of the motor; counts = rad x 4096 /
-    (2 pi)], clipped to 0 .. :data:`repro.sim.barrett.MOTOR_ANGLE_MAX` (the applied command;
-    the runner's ``motor_n_sat`` counts the clipped fingers). Before every physics step each
-    finger's :class:`repro.sim.barrett.FingerDrive` moves its motor towards the target
-    (trapezoidal profile, 305 rad/s, full speed in 50 ms), updates its TorqueSwitch and sends
-    the joint commands. The spread motor is held at ``spread`` [rad] by PyBullet's position
-    motor (set once: a position motor persists between steps). The safe command holds the
-    last targets (the Barrett's hold).
-    """
-
-    mode = "motor_position"
-    unit = "rad"
-    clip_to = "its motor's range 0 .. MOTOR_ANGLE_MAX (repro.sim.barrett)"
-
-    def __init__(self, motors: FingerMotors, couplings: B.HandCouplings,
-                 spread: float = 0.0) -> None:
-        self.robot: JointSet = motors
-        self.fingers = [B.FingerDrive(motors.body, motors.client, k, couplings) for k in FINGERS]
-        self.spread = float(spread)
-        B.set_spread(motors.body, motors.client, self.spread)
-        self.target = np.array([f.motor_angle for f in self.fingers])
-
-    def command(self, u: np.ndarray, dt: float) -> np.ndarray:
-        self.target = np.clip(np.asarray(u, dtype=float), 0.0, B.MOTOR_ANGLE_MAX)
-        return self.target.copy()
-
-    def substep(self, i: int, h: float) -> None:
-        for finger, m in zip(self.fingers, self.target, strict=True):
-            finger.step(float(m), h)
-
-    def safe_command(self) -> np.ndarray:
-        return self.target.copy()
-
-    def describe(self) -> dict[str, Any]:
-        return {"kind": "barrett_bh8_finger_motors", "command": "motor angle target per finger "
-                "[rad]; counts = rad * 4096 / (2 pi)", "spread_rad": self.spread,
-                "motor": "repro.sim.barrett.FingerDrive: trapezoidal motor profile "
-                f"({B.MOTOR_SPEED_MAX:.1f} rad/s, {B.MOTOR_ACCELERATION_MAX:.0f} rad/s^2), "
-                f"TorqueSwitch breakaway at {B.BREAKAWAY_TORQUE:.3f} N m on the proximal, "
-                "PyBullet position control of the joints (gain "
-                f"{B.POSITION_GAIN}), JOINT_GEAR constraints distal = proximal / 3 (engaged) "
-                "and spread 2 = spread 1",
-                "measured_motor_angle": "motor_q{i} = 93.75 (q_proximal + q_distal)",
-                "counts_per_motor_rev": B.COUNTS_PER_MOTOR_REV}
-
-
 # ============================================================================ sensors
 class FingerTorques(NamedTuple):
     """The joint motor torques of the last physics step [N m] (what the Pucks' currents give).
@@ -448,11 +354,7 @@ class GraspAudit:
         self.cylinder, self.support = cylinder, support
         self.support_id = scene[support].ids[0]
         self.reference_now = reference_now
-        c = hand.client
-        palm = hand.pb_link_index("bh8_palm")
-        pos, quat = p.getLinkState(hand.body, palm, computeForwardKinematics=True,
-                                   physicsClientId=c)[4:6]
-        self.T_palm_world = inv_T(pb_to_pose(pos, quat))
+        palm = self.palm = hand.pb_link_index("bh8_palm")
         self.link_owner: dict[int, str] = {}
         for k in FINGERS:
             for part in ("proximal", "distal"):
@@ -468,7 +370,9 @@ class GraspAudit:
         c = self.hand.client
         pos, quat = p.getBasePositionAndOrientation(self.cyl, physicsClientId=c)
         T_world_cyl = pb_to_pose(pos, quat)  # (the Scene keeps its own copy: refresh_dynamic)
-        T = self.T_palm_world @ T_world_cyl
+        pos, quat = p.getLinkState(self.hand.body, self.palm, computeForwardKinematics=True,
+                                   physicsClientId=c)[4:6]
+        T = inv_T(pb_to_pose(pos, quat)) @ T_world_cyl  # the palm moves with an arm
         if self.T_ref is None and self.reference_now():
             self.T_ref = T.copy()
         cols: dict[str, float | bool] = {}
@@ -504,8 +408,9 @@ class GraspAudit:
         cols["F_raw_palm"] = force["palm"]
         cols["F_raw_other"] = force["other"]
         cols["F_raw_total"] = float(sum(force.values()))
-        for body, dist in self.scene.distances(self.hand).items():
-            cols[f"hand_dist_{body}"] = dist
+        dists = self.scene.distances(self.hand)
+        for body in (self.cylinder, self.support):
+            cols[f"hand_dist_{body}"] = dists[body]
         cols["hand_dist_min"] = cols[f"hand_dist_{self.support}"]
         dropped = bool(self.T_ref is not None and not any(touching) and force["palm"] == 0.0
                        and not on_support and cols["obj_disp"] > DROP_M)
@@ -541,6 +446,8 @@ class GraspAudit:
 # ============================================================================ columns
 #: Phases of the controller (column ``phase``).
 PHASES = {
+    "waiting": "the whole task only: the approach is on, the finger motors hold (Table 1)",
+    "preshape": "the whole task only: the fingers move to the pre-shape at preshape_speed",
     "closing": "automatic closing: fingers close until each one's pressure reaches grasp_kpa "
                "(or its clutch breaks away)",
     "support": "every finger stopped: held while the support is lowered and the cylinder "
@@ -553,15 +460,15 @@ PHASES = {
 DECISIONS = ("", "ok", "readjust", "readjust_blocked_torque", "give_up_continue", "stop")
 
 
-def declare_columns() -> Columns:
+def declare_columns(hand_joints: bool = True) -> Columns:
     """The experiment's own columns (the runner adds ``t``, ``motor_*``, the pose columns of
-    the cylinder and the support; the tactile sensor its ``tac_*``)."""
+    the cylinder and the support; the tactile sensor its ``tac_*``); ``hand_joints``: also
+    ``hand_q{i}`` (False: someone else declares them)."""
     cols = Columns()
     cols.add("phase", "text", "controller phase: " + "; ".join(f"{k}: {v}"
                                                                 for k, v in PHASES.items()))
-    for i, j in enumerate(B.BH8_JOINTS, start=1):
-        cols.add(f"hand_q{i}", "rad", f"measured angle of hand joint {i} ({j}; PyBullet joint "
-                 "state)")
+    if hand_joints:
+        declare_hand_joint_columns(cols)
     cols.add("counts{i}", "counts", "motor counts of finger {i}: measured motor angle "
              "motor_q{i} x 4096 / (2 pi) (pomares2011 Fig. 12a)", n=N_FINGERS)
     cols.add("cmd_counts{i}", "counts", "commanded motor target of finger {i} in counts "
@@ -649,12 +556,25 @@ class Exp3Controller:
             grasp's motor targets plus ``plan - plan[0]``.
     """
 
-    def __init__(self, config: Exp3Config, preshape: np.ndarray, plan: np.ndarray) -> None:
+    def __init__(self, config: Exp3Config, preshape: np.ndarray, plan: np.ndarray,
+                 hand_body: str = "hand", hand_idx: np.ndarray | None = None,
+                 start: np.ndarray | None = None, preshape_rate: float = 0.0) -> None:
         self.config = config
         self.plan = np.asarray(plan, dtype=float)
         self.dy = planned_dy(config)
-        self.targets = np.asarray(preshape, dtype=float).copy()
-        self.phase = "closing"
+        #: the body whose q holds the hand's joints, and their positions in it
+        self.hand_body = hand_body
+        self.hand_idx = (np.arange(len(B.BH8_JOINTS)) if hand_idx is None
+                         else np.asarray(hand_idx))
+        self.preshape = np.asarray(preshape, dtype=float).copy()
+        #: the pre-shaping speed of every motor [rad/s] (phase ``preshape``)
+        self.preshape_rate = float(preshape_rate)
+        if start is None:  # experiment 3: the fingers start pre-shaped, closing
+            self.targets, self.phase = self.preshape.copy(), "closing"
+        else:  # the whole task: the fingers hold ``start`` until begin()
+            self.targets, self.phase = np.asarray(start, dtype=float).copy(), "waiting"
+            if self.preshape_rate <= 0.0:
+                raise ConfigError("a hand that starts elsewhere needs preshape_rate > 0")
         self.closed = np.zeros(N_FINGERS, dtype=bool)
         self.t_grasp: float | None = None
         self.t_manipulation: float | None = None
@@ -675,6 +595,15 @@ class Exp3Controller:
         self.samples: list[tuple[float, dict[str, np.ndarray]]] = []
         #: Chosen instants for the pressure images: name -> time [s].
         self.instants: dict[str, float] = {}
+
+    def begin(self, t: float, events: list[tuple[str, str]]) -> None:
+        """End of the approach (the whole task): pre-shape, then close."""
+        if self.phase != "waiting":
+            raise ConfigError(f"begin() in phase {self.phase!r}: the hand has already begun")
+        self.phase = "preshape"
+        self.instants["hand_start"] = t
+        events.append(("hand_preshape", f"fingers move from {np.round(self.targets, 2).tolist()}"
+                       f" to the pre-shape {np.round(self.preshape, 2).tolist()} rad of motor"))
 
     @property
     def manipulating(self) -> bool:
@@ -719,7 +648,7 @@ class Exp3Controller:
         cfg, t = self.config, obs.t
         reading: TactileReading = obs.sensors["tactile"]
         torque: FingerTorques = obs.sensors["finger_torque"]
-        q_hand = obs.q["hand"]
+        q_hand = obs.q[self.hand_body][self.hand_idx]
         events: list[tuple[str, str]] = []
         p_f = self.finger_pressures(reading)
         if reading.new:
@@ -735,7 +664,13 @@ class Exp3Controller:
         self.broken = broken
         decisions: dict[int, tuple[str, float, int]] = {}
         tick = False
-        if self.phase == "closing":
+        if self.phase == "preshape":
+            step = self.preshape_rate * DT
+            self.targets = self.targets + np.clip(self.preshape - self.targets, -step, step)
+            if np.array_equal(self.targets, self.preshape):
+                self.phase = "closing"
+                events.append(("preshape_done", "fingers pre-shaped: automatic closing"))
+        elif self.phase == "closing":
             if reading.new:
                 grasp = np.asarray(cfg.grasp_kpa, dtype=float)
                 for f in np.flatnonzero(~self.closed & ((p_f >= grasp) | broken)):
@@ -806,8 +741,7 @@ class Exp3Controller:
                  ) -> dict[str, float | int | str | bool]:
         reading: TactileReading = obs.sensors["tactile"]
         cols: dict[str, float | int | str | bool] = {"phase": self.phase, "tick": tick}
-        for i, v in enumerate(obs.q["hand"], start=1):
-            cols[f"hand_q{i}"] = float(v)
+        cols.update(hand_joint_values(obs.q[self.hand_body][self.hand_idx]))
         for i in range(N_FINGERS):
             cols[f"counts{i + 1}"] = B.motor_angle_to_counts(float(obs.q["fingers"][i]))
             cols[f"cmd_counts{i + 1}"] = B.motor_angle_to_counts(float(self.targets[i]))

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from experiments.pomares2011 import scene as sc
-from experiments.pomares2011.columns import declare_columns
+from experiments.pomares2011.columns import declare_columns, hand_joint_values
 from experiments.pomares2011.config import Pomares2011Config
 from repro.config import validate
 from repro.control.hybrid_vs import (
@@ -35,10 +35,11 @@ from repro.errors import ConfigError, SensorError
 from repro.geometry import inv_T
 from repro.planning.capsules import Capsule, capsule_closest_points, min_distance
 from repro.sensors.camera import Camera
+from repro.sim import barrett as B
 from repro.sim.drives import PositionReferenceDrive, TorqueDrive, VelocityDrive
 from repro.sim.episode import CameraRig, Episode, Observation, StepResult, View, run_episode
 from repro.sim.human import HumanMotion, add_tracking_noise
-from repro.sim.pa10 import ALL_JOINTS, MINI_CAPSULES, MINI_JOINTS, PA10_JOINTS
+from repro.sim.pa10 import ALL_JOINTS, HAND_JOINTS, MINI_CAPSULES, MINI_JOINTS, PA10_JOINTS
 from repro.sim.robot import JointGroup, Robot
 from repro.sim.scene import Scene
 from repro.sim.world import WorldConfig
@@ -52,6 +53,8 @@ N = 4  # pomares2011 Sec. 7: four image points
 TRACKING_EVENT_M = 0.02
 #: Positions of the mini-robot's joints in ALL_JOINTS (q of the whole chain).
 _MINI_IDX = np.array([ALL_JOINTS.index(j) for j in MINI_JOINTS])
+#: Positions of the hand's joints in ALL_JOINTS.
+HAND_IDX = np.array([ALL_JOINTS.index(j) for j in HAND_JOINTS])
 
 
 def check_config(config: Pomares2011Config) -> None:
@@ -160,12 +163,16 @@ def learn_s_u_star(scene: Scene, chain: Robot, rig: CameraRig) -> Learned:
 class Pomares2011Controller:
     """Camera frame -> VVS pose (22)-(24) -> RVC law (18) for the PA-10; the direct hybrid
     controller (1)-(5), (17) for the mini-robot at every control step (features held between
-    frames), or the indirect baseline. ``__call__`` is the episode runner's controller."""
+    frames), or the indirect baseline; the hand's finger motors hold ``hand_hold`` [rad]
+    (Table 1, approaching: "no control"). ``__call__`` is the episode runner's controller."""
 
     def __init__(self, config: Pomares2011Config, chain: Robot, arm: JointGroup,
                  mini: JointGroup, human: _Bones | None = None,
-                 s_u_star: np.ndarray | None = None) -> None:
+                 s_u_star: np.ndarray | None = None,
+                 hand_hold: np.ndarray | None = None) -> None:
         self.config, self.chain, self.arm, self.mini = config, chain, arm, mini
+        self.hand_hold = np.full(3, sc.HAND_APPROACH_MOTOR) if hand_hold is None else (
+            np.asarray(hand_hold, dtype=float))
         #: the RVC's desired features [px]: the learning stage's (default: the paper's)
         self.s_u_star = np.asarray(sc.S_U_STAR if s_u_star is None else s_u_star, float)
         self.human = human
@@ -271,8 +278,9 @@ class Pomares2011Controller:
                 tau, e2 = self.hybrid.avoid_only(obs.qd["mini"], J_g, G, hd.dist, hd.grad)
                 cols = {**cols, "e2": e2}
             cols = {**cols, "secondary_active": bool(active)}
-        return StepResult({"arm": np.zeros(self.arm.n), "mini": tau}, dict(cols), events,
-                          fallback=True)
+        cols = {**cols, **hand_joint_values(q[HAND_IDX])}
+        return StepResult({"arm": np.zeros(self.arm.n), "mini": tau,
+                           "fingers": self.hand_hold.copy()}, dict(cols), events, fallback=True)
 
     def __call__(self, obs: Observation) -> StepResult:
         q, f = obs.q["pa10"], obs.features["camera"]
@@ -288,9 +296,10 @@ class Pomares2011Controller:
         if obs.step % self.config.camera_period == 0:
             self._rvc(q, f.uv, obs.t, events)
         if self.T_mc_obj is None:
-            return StepResult({"arm": np.zeros(self.arm.n), "mini": self.mini.gravity_torques()},
-                              {}, [("no_pose", "PnP found no object pose: waiting")],
-                              fallback=True)
+            return StepResult({"arm": np.zeros(self.arm.n), "mini": self.mini.gravity_torques(),
+                               "fingers": self.hand_hold.copy()},
+                              dict(hand_joint_values(q[HAND_IDX])),
+                              [("no_pose", "PnP found no object pose: waiting")], fallback=True)
         P_c = sc.POINTS_P @ self.T_mc_obj[:3, :3].T + self.T_mc_obj[:3, 3]
         L_px = pixel_interaction_matrix(f.uv, P_c[:, 2])  # depths from the VVS pose
         if self.hybrid is None:
@@ -322,8 +331,9 @@ class Pomares2011Controller:
         cols.update(V=diag["V"], e_s_px=float(np.sqrt(np.mean(np.sum(
             (f.uv - sc.S_STAR) ** 2, axis=1)))), e_f1y_px=e_y, e2=diag["e2"],
             secondary_active=active, flange_x=flange[0], flange_y=flange[1],
-            flange_z=flange[2], **cols_h)
-        return StepResult({"arm": self.qd_arm, "mini": tau}, cols, events)
+            flange_z=flange[2], **cols_h, **hand_joint_values(q[HAND_IDX]))
+        return StepResult({"arm": self.qd_arm, "mini": tau, "fingers": self.hand_hold.copy()},
+                          cols, events)
 
 
 def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares2011Controller]:
@@ -336,6 +346,7 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
     chain, bodies = sc.build_scene(scene, sc.Q_START, human=human)
     arm = scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True)
     mini = scene.add_joint_group("pa10", "mini", MINI_JOINTS, "mini_")
+    hand_drive = add_hand(scene, chain)
     scene.add_mount("camera", "pa10", "mini_camera_optical", np.eye(4),
                     "the mini-robot camera (x right, y down, z forward)")
     scene.add_mount("rvc", "pa10", "pa10_flange", sc.T_FLANGE_RVC,
@@ -366,11 +377,29 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
                                 "floor_z_m": sc.FLOOR_Z}
         for name, _ in human.capsules(0.0):
             movers[bodies.prefix + name] = bones.pose(name)
-    ep = Episode(scene, {"arm": _arm_drive(arm, config.arm_drive), "mini": TorqueDrive(mini)}, ctrl,
+    ep = Episode(scene, {"arm": _arm_drive(arm, config.arm_drive), "mini": TorqueDrive(mini),
+                         "fingers": hand_drive}, ctrl,
                  declare_columns(config.human), config.duration, cameras=[rig],
                  movers=movers, video=config.video, video_every=33,
                  view=View((0.5, -0.3, 0.3), 2.0, 20, -25), log_every=config.log_every)
     return ep, ctrl
+
+
+def add_hand(scene: Scene, chain: Robot) -> B.BarrettHandDrive:
+    """The BH8-282 on the flange as the scene's joint group ``hand`` (its joints' q columns
+    ``hand_q{i}``) and its three finger motors (:class:`repro.sim.barrett.FingerMotors`,
+    columns ``motor_*``) driven through the gear constraints and the TorqueSwitch
+    (:class:`repro.sim.barrett.BarrettHandDrive`), spread 0."""
+    scene.add_joint_group("pa10", "hand", HAND_JOINTS, "hand_")
+    couplings = B.add_coupling_constraints(chain.body, chain.client)
+    drive = B.BarrettHandDrive(B.FingerMotors(chain), couplings)
+    scene.extra["hand"] = {"model": "Barrett BH8-282 (repro/assets/barrett_bh8), root bh8_base "
+                           "= pa10_flange", "drive": drive.describe(),
+                           "approach_motor_rad": sc.HAND_APPROACH_MOTOR,
+                           "approach": "Table 1, approaching: no control; the finger motors "
+                                       "hold every finger half open (proximal 60 deg, distal "
+                                       "20 deg)"}
+    return drive
 
 
 def _arm_drive(arm: JointGroup, kind: str) -> VelocityDrive | PositionReferenceDrive:

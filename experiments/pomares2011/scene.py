@@ -50,12 +50,14 @@ from repro.sensors.camera import (
     Intrinsics,
     check_scene_colors,
 )
+from repro.sim import barrett as B
 from repro.sim.human import HumanBody, HumanInScene, HumanMotion, HumanPath
 from repro.sim.pa10 import (
     ALL_JOINTS,
     ALL_LIMITS,
-    BARRETT_PLACEHOLDER,
+    HAND_JOINTS,
     MINI_CAPSULES,
+    PALM_HEIGHT,
     pa10_urdf_path,
 )
 from repro.sim.robot import Robot
@@ -76,10 +78,10 @@ INTRINSICS = Intrinsics(width=IMAGE_W, height=IMAGE_H, fu=1082.3, fv=1073.7, u0=
 #: (repro/control/rvc.py). Being virtual it has no image bounds.
 RVC_INTRINSICS = INTRINSICS
 #: Pose of the RVC in ``pa10_flange``. ours: the paper puts the RVC "at the end of the
-#: robotic manipulator" (Sec. 5.1); we put it in the palm (``hand_palm``, 78 mm out on the
+#: robotic manipulator" (Sec. 5.1); we put it in the palm (``bh8_palm``, 79 mm out on the
 #: hand axis, same axes as the flange): a virtual eye-in-hand camera looking along the
 #: approach direction, image x = flange x, image y = flange y.
-T_FLANGE_RVC = trans(0.0, 0.0, BARRETT_PLACEHOLDER.palm_height)
+T_FLANGE_RVC = trans(0.0, 0.0, PALM_HEIGHT)
 
 # --------------------------------------------------------------- desired features (Sec. 7.1)
 #: s* of the mini-robot camera, f1..f4 [px] (pomares2011 Sec. 7.1); dot i images at row i.
@@ -143,22 +145,47 @@ T_WORLD_FLANGE_GOAL = (OBJECT.T_world @ trans(0.0, 0.0, OBJECT.top_z + GOAL_STAN
 #: object" (Sec. 7); the start is not given.
 T_WORLD_FLANGE_START = (trans(-0.10, 0.15, 0.30) @ T_WORLD_FLANGE_GOAL @ Rz(25.0 * DEG)
                         @ Ry(10.0 * DEG))
-#: Seed of solve_ik for the goal (elbow up, wrist bent down); the start is solved from the goal.
-IK_SEED_GOAL = np.array([0.0, -0.6, -1.6, 0.0, -0.9, 0.0, 0.0, 0.0, 0.0])
+#: The hand during the approach (Table 1: "no control"; its motors hold): spread 0, every
+#: finger half open, its motor at 125 x 60 deg (engaged clutch: proximal 60 deg, distal 20
+#: deg). ours: the fingertips clear of the part and of the mini-robot (tests).
+HAND_APPROACH_PROXIMAL_DEG = 60.0
+#: That pose's motor angle per finger [rad of the motor].
+HAND_APPROACH_MOTOR = B.J2_RATIO * HAND_APPROACH_PROXIMAL_DEG * DEG
 
-#: Goal configuration, ALL_JOINTS order [rad]. PA-10: solve_ik(pa10_flange,
+
+def hand_pose(motor: tuple[float, float, float] | np.ndarray, spread: float = 0.0
+              ) -> np.ndarray:
+    """(8,) hand joint angles, :data:`repro.sim.barrett.BH8_JOINTS` order [rad], of the three
+    finger motors at ``motor`` [rad] with the clutch engaged, and ``spread`` [rad]."""
+    q = np.zeros(len(HAND_JOINTS))
+    for k, m in zip(B.FINGERS, motor, strict=True):
+        q_p, q_d = B.finger_joints_from_motor(float(m))
+        q[HAND_JOINTS.index(f"bh8_finger{k}_proximal_joint")] = q_p
+        q[HAND_JOINTS.index(f"bh8_finger{k}_distal_joint")] = q_d
+    for j in B.BH8_SPREAD_JOINTS:
+        q[HAND_JOINTS.index(j)] = spread
+    return q
+
+
+#: The hand's joints during the approach [rad] (HAND_JOINTS order).
+Q_HAND = hand_pose((HAND_APPROACH_MOTOR,) * 3)
+#: Seed of solve_ik for the goal (elbow up, wrist bent down); the start is solved from the goal.
+IK_SEED_GOAL = np.r_[0.0, -0.6, -1.6, 0.0, -0.9, 0.0, 0.0, 0.0, 0.0, Q_HAND]
+
+#: Goal configuration, ALL_JOINTS order [rad] (PA-10, mini-robot, then the hand at
+#: :data:`Q_HAND`). PA-10: solve_ik(pa10_flange,
 #: T_WORLD_FLANGE_GOAL, IK_SEED_GOAL) (re-solved in the tests). Mini-robot ours: turned 90 deg
 #: around the hand (to the world -y side), leaning back (q2 = -50 deg) for depth (0.19-0.21
 #: m), q3 pointing the optical axis so that the top-face centre images at v = 265 px, the
 #: mean v of s* (its u stays at u0: the pointing plane contains the hand axis).
-Q_GOAL = np.array([0.0, -18.624802, -107.027660, 0.0, -54.347538, 0.0,
-                   90.0, -50.0, 101.2]) * DEG
+Q_GOAL = np.r_[np.array([0.0, -18.624802, -107.027660, 0.0, -54.347538, 0.0,
+                         90.0, -50.0, 101.2]) * DEG, Q_HAND]
 #: Start configuration of experiment 1 [rad]. PA-10: solve_ik(pa10_flange,
 #: T_WORLD_FLANGE_START, Q_GOAL). Mini-robot ours: pointing at the part from q2 = -30 deg
 #: (q1, q3 put the top-face centre near (360, 200) px): all four dots in view, 0.41 m away,
-#: 67-107 px from s*.
-Q_START = np.array([19.613526, 4.515521, -96.213856, -7.088649, -81.213912, 45.263252,
-                    78.0, -30.0, 38.4]) * DEG
+#: 67-107 px from s*. The hand at :data:`Q_HAND`.
+Q_START = np.r_[np.array([19.613526, 4.515521, -96.213856, -7.088649, -81.213912, 45.263252,
+                          78.0, -30.0, 38.4]) * DEG, Q_HAND]
 Q_GOAL.setflags(write=False)
 Q_START.setflags(write=False)
 

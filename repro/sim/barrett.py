@@ -51,21 +51,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import pybullet as p
 
 from repro.errors import ConfigError
-from repro.sim.robot import JointLimits
+from repro.sim.robot import JointLimits, JointSet, Robot
 
 __all__ = [
     "BH8_DISTAL_JOINTS", "BH8_DISTAL_LINKS", "BH8_GEOMETRY", "BH8_JOINTS", "BH8_KNUCKLE_LINKS",
     "BH8_LIMITS", "BH8_PAD_FRAMES", "BH8_PROXIMAL_JOINTS", "BH8_PROXIMAL_LINKS",
-    "BH8_SPREAD_JOINTS", "BH8_TIP_FRAMES", "BREAKAWAY_TORQUE", "COUNTS_PER_MOTOR_REV",
+    "BH8_SPREAD_JOINTS", "BH8_TIP_FRAMES", "BREAKAWAY_TORQUE", "BarrettHandDrive",
+    "COUNTS_PER_MOTOR_REV",
     "DISTAL_RATIO", "FINGERS", "GEAR_MAX_FORCE", "J2_RATIO", "J3_RATIO", "MOTOR_ANGLE_MAX",
     "MOTOR_ACCELERATION_MAX", "MOTOR_SPEED_MAX", "SPREAD_RATIO", "BH8Geometry", "FingerDrive",
-    "FingerTargets", "HandCouplings", "TorqueSwitch", "add_coupling_constraints",
+    "FingerMotors", "FingerTargets", "HandCouplings", "TorqueSwitch", "add_coupling_constraints",
     "bh8_dh_frames", "bh8_joint_indices", "bh8_urdf_path", "counts_to_motor_angle",
     "finger_counts", "finger_joints_from_counts", "finger_joints_from_motor",
     "finger_motor_angle", "motor_angle_to_counts", "set_gear_engaged", "set_spread",
@@ -619,3 +620,101 @@ class FingerDrive:
                                     positionGain=POSITION_GAIN, velocityGain=1.0,
                                     force=self.tau_max_distal, physicsClientId=self.client)
         return t
+
+
+# ------------------------------------------------------------------------- the drive
+class FingerMotors(JointSet):
+    """The three finger motors of a loaded BH8 body as a joint set (the runner logs them as
+    ``<prefix>q{i}``, ``qd{i}``, ``u{i}``): position = the motor angle [rad] of finger i,
+    ``93.75 (q_proximal + q_distal)`` of the simulated joints (the distal gear sits on the
+    motor shaft: valid before and after breakaway), velocity its rate [rad/s].
+
+    ``robot`` is the body that carries the hand: the standalone hand, or the PA-10 chain of
+    :mod:`repro.sim.pa10` (the joints are found by name). The runner then also observes its
+    joints, and measures the ground-truth distances over ``links``: the proximal and distal
+    links.
+    """
+
+    #: what the runner's columns call one element of this set
+    element = "finger motor"
+    state_source = "93.75 (q_proximal + q_distal) of the PyBullet joint states"
+
+    def __init__(self, hand: Robot, name: str = "fingers", column_prefix: str = "motor_") -> None:
+        self.robot = hand
+        self.world, self.body, self.client = hand.world, hand.body, hand.client
+        self.name, self.column_prefix = name, column_prefix
+        idx = bh8_joint_indices(hand.body, hand.client)
+        self._pairs = [(idx[f"bh8_finger{k}_proximal_joint"], idx[f"bh8_finger{k}_distal_joint"])
+                       for k in FINGERS]
+        self.pb_joints = [a for a, _ in self._pairs]
+        self.n = len(FINGERS)
+        k_p = BH8_JOINTS.index("bh8_finger1_proximal_joint")
+        self.limits = JointLimits(q_min=(0.0,) * 3, q_max=(MOTOR_ANGLE_MAX,) * 3,
+                                  qd_max=(MOTOR_SPEED_MAX,) * 3,
+                                  tau_max=(BH8_LIMITS.tau_max[k_p],) * 3)
+        names = {f"bh8_finger{k}_{part}" for k in FINGERS for part in ("proximal", "distal")}
+        self.links = sorted(idx[n] for n in names)
+
+    def _states(self) -> list[tuple[Any, ...]]:
+        return list(p.getJointStates(self.body, [j for pair in self._pairs for j in pair],
+                                     physicsClientId=self.client))
+
+    def q(self) -> np.ndarray:
+        s = self._states()
+        return np.array([DISTAL_RATIO * (s[2 * i][0] + s[2 * i + 1][0]) for i in range(3)])
+
+    def qd(self) -> np.ndarray:
+        s = self._states()
+        return np.array([DISTAL_RATIO * (s[2 * i][1] + s[2 * i + 1][1]) for i in range(3)])
+
+    def gravity_torques(self, q: np.ndarray) -> np.ndarray:
+        return np.zeros(self.n)
+
+
+class BarrettHandDrive:
+    """The hand's three finger motors (the Drive protocol of :mod:`repro.sim.drives`).
+
+    Command: one motor angle target per finger [rad of the motor; counts = rad x 4096 /
+    (2 pi)], clipped to 0 .. :data:`repro.sim.barrett.MOTOR_ANGLE_MAX` (the applied command;
+    the runner's ``motor_n_sat`` counts the clipped fingers). Before every physics step each
+    finger's :class:`repro.sim.barrett.FingerDrive` moves its motor towards the target
+    (trapezoidal profile, 305 rad/s, full speed in 50 ms), updates its TorqueSwitch and sends
+    the joint commands. The spread motor is held at ``spread`` [rad] by PyBullet's position
+    motor (set once: a position motor persists between steps). The safe command holds the
+    last targets (the Barrett's hold).
+    """
+
+    mode = "motor_position"
+    unit = "rad"
+    clip_to = "its motor's range 0 .. MOTOR_ANGLE_MAX (repro.sim.barrett)"
+
+    def __init__(self, motors: FingerMotors, couplings: HandCouplings,
+                 spread: float = 0.0) -> None:
+        self.robot: JointSet = motors
+        self.fingers = [FingerDrive(motors.body, motors.client, k, couplings) for k in FINGERS]
+        self.spread = float(spread)
+        set_spread(motors.body, motors.client, self.spread)
+        self.target = np.array([f.motor_angle for f in self.fingers])
+
+    def command(self, u: np.ndarray, dt: float) -> np.ndarray:
+        self.target = np.clip(np.asarray(u, dtype=float), 0.0, MOTOR_ANGLE_MAX)
+        return self.target.copy()
+
+    def substep(self, i: int, h: float) -> None:
+        for finger, m in zip(self.fingers, self.target, strict=True):
+            finger.step(float(m), h)
+
+    def safe_command(self) -> np.ndarray:
+        return self.target.copy()
+
+    def describe(self) -> dict[str, Any]:
+        return {"kind": "barrett_bh8_finger_motors", "command": "motor angle target per finger "
+                "[rad]; counts = rad * 4096 / (2 pi)", "spread_rad": self.spread,
+                "motor": "repro.sim.barrett.FingerDrive: trapezoidal motor profile "
+                f"({MOTOR_SPEED_MAX:.1f} rad/s, {MOTOR_ACCELERATION_MAX:.0f} rad/s^2), "
+                f"TorqueSwitch breakaway at {BREAKAWAY_TORQUE:.3f} N m on the proximal, "
+                "PyBullet position control of the joints (gain "
+                f"{POSITION_GAIN}), JOINT_GEAR constraints distal = proximal / 3 (engaged) "
+                "and spread 2 = spread 1",
+                "measured_motor_angle": "motor_q{i} = 93.75 (q_proximal + q_distal)",
+                "counts_per_motor_rev": COUNTS_PER_MOTOR_REV}

@@ -141,13 +141,16 @@ class StepResult:
     """What the controller returns: one command per robot (by name), extra trace columns,
     events, a stop request ``(event kind, reason)`` applied after this row, and whether the
     command is a fallback (u = 0 after a failed solve or a lost feature) rather than the
-    controller's own: a run in which every step fell back ends ``failed``."""
+    controller's own: a run in which every step fell back ends ``failed``. ``log_row``: write
+    this step's row even between two ``log_every`` rows (a controller with a tick of its own,
+    e.g. a 30 Hz tactile loop inside a 100 Hz log, keeps every tick in the trace)."""
 
     command: dict[str, np.ndarray]
     columns: dict[str, Scalar] = field(default_factory=dict)
     events: list[tuple[str, str]] = field(default_factory=list)
     stop: tuple[str, str] | None = None
     fallback: bool = False
+    log_row: bool = False
 
 
 @dataclass(frozen=True)
@@ -527,7 +530,7 @@ class _Runner:
             if k == 0:
                 self.cols.check(row)
                 self.cols.write(self.out_dir / COLUMNS_FILE, row)
-            if k % ep.log_every == 0 or k == n_steps or stop is not None:
+            if k % ep.log_every == 0 or k == n_steps or stop is not None or res.log_row:
                 rec.record(row)
             if ep.video and k % ep.video_every == 0:
                 self.frames.append(ep.view.render(ep.scene.physics.client))

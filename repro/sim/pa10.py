@@ -1,14 +1,16 @@
-"""The pomares2011 robot chain as one URDF: Mitsubishi PA-10 (6 DoF), a Barrett BH8-282
-hand placeholder on its flange and the authors' RRR mini-robot carrying the camera.
+"""The pomares2011 robot chain as one URDF: Mitsubishi PA-10 (6 DoF), the Barrett BH8-282
+hand of :mod:`repro.sim.barrett` on its flange and the authors' RRR mini-robot carrying the
+camera.
 
 The URDF ``repro/assets/pa10/pa10_mini.urdf`` is written by
 ``repro/assets/pa10/make_urdf.py`` from the numbers below and the link shapes in that
 script; ``repro/assets/pa10/README.md`` gives the source of every number (public figures
 from the facts sheet, or ``# ours`` with the reason).
 
-One :class:`repro.sim.robot.Robot` drives all nine joints, :data:`ALL_JOINTS` (the PA-10's
-six, then the mini-robot's three); a controller commands a subset of them (the PA-10 by
-RVC, the mini-robot by the direct hybrid controller, pomares2011 Table 1).
+One :class:`repro.sim.robot.Robot` holds all 17 joints, :data:`ALL_JOINTS` (the PA-10's
+six, the mini-robot's three, the hand's eight); a controller commands a subset of them (the
+PA-10 by RVC, the mini-robot by the direct hybrid controller, the hand's three finger motors
+by the tactile control, pomares2011 Table 1).
 
 Conventions:
 
@@ -21,8 +23,8 @@ Conventions:
   axes; a positive q2, q3 or q5 tilts the distal part towards ``-x``.
 * **Flange** ``pa10_flange`` = DH frame 6 of the table below (its ``x`` is the base's
   ``-x`` at ``q = 0``); ``+z`` out of the flange.
-* **Hand** ``hand_base`` (= ``pa10_flange``) and ``hand_palm`` (palm surface, normal
-  ``+z`` = approach direction, 78 mm out).
+* **Hand** ``bh8_base`` (= ``pa10_flange``) and ``bh8_palm`` (palm surface, normal
+  ``+z`` = approach direction, 79 mm out); its other frames in :mod:`repro.sim.barrett`.
 * **Mini-robot** ``mini_base`` (= ``pa10_flange``): ``mini_joint1`` turns the mini-robot
   about the flange ``z`` axis, around the hand ("q1 rotates it around the task",
   pomares2011 Sec. 7); ``mini_joint2`` and ``mini_joint3`` are parallel pitch joints
@@ -55,12 +57,14 @@ from pathlib import Path
 import numpy as np
 
 from repro.errors import ConfigError
+from repro.sim.barrett import BH8_GEOMETRY, BH8_JOINTS, BH8_LIMITS
 from repro.sim.robot import JointLimits
 
 PA10_JOINTS = tuple(f"pa10_joint{i}" for i in range(1, 7))
 MINI_JOINTS = ("mini_joint1", "mini_joint2", "mini_joint3")
-#: Every actuated joint of the URDF, in the order of :data:`ALL_LIMITS` (PA-10, then mini).
-ALL_JOINTS = PA10_JOINTS + MINI_JOINTS
+#: Every non-fixed joint of the URDF, in the order of :data:`ALL_LIMITS`: the PA-10's six,
+#: the mini-robot's three, then the hand's eight (:data:`repro.sim.barrett.BH8_JOINTS`).
+ALL_JOINTS = PA10_JOINTS + MINI_JOINTS + BH8_JOINTS
 #: Links of the PA-10 in chain order, from the fixed base pa10_link0 to the flange link.
 PA10_LINKS = tuple(f"pa10_link{i}" for i in range(0, 7))
 MINI_LINKS = ("mini_link1", "mini_link2", "mini_link3")
@@ -98,55 +102,12 @@ PA10_LINK_MASSES = (3.04, 9.78, 11.92, 4.31, 3.45, 1.46, 0.24)  # 11.92 = 8.41 +
 PA10_FOREARM_ROLL_OFFSET = 0.25
 
 # ---------------------------------------------------------------------------- hand
+#: The hand on the flange: the Barrett BH8-282 of :mod:`repro.sim.barrett` (its root
+#: ``bh8_base`` = ``pa10_flange``), joints :data:`repro.sim.barrett.BH8_JOINTS`.
+HAND_JOINTS = BH8_JOINTS
+#: Palm surface out from the flange along its z [m] (the hand's ``bh8_palm`` frame).
+PALM_HEIGHT = BH8_GEOMETRY.palm_height
 
-
-@dataclass(frozen=True)
-class BarrettPlaceholder:
-    """Primitive stand-in for the Barrett BH8-282 hand, fixed on ``pa10_flange``.
-
-    One definition, read by ``repro/assets/pa10/make_urdf.py``; the tactile issue replaces
-    it with the real (actuated) hand. All positions in the hand frame ``hand_base``
-    (= ``pa10_flange``: ``+z`` the approach direction) [m]; sizes are full sizes [m].
-
-    Attributes:
-        base_mass: hand base (palm, motors, electronics) [kg] (Barrett wiki Hand/280).
-        finger_mass: one finger, proximal + distal [kg] (Barrett wiki Hand/282), split
-            between the two phalanges in proportion to their box volumes.
-        wrist_cylinder: (radius, length) of the round base body on the flange.
-        spine_box: box across the base carrying the knuckles (x, y, z).
-        palm_box: palm plate (x, y, z) on top of the spine; its top face is the palm.
-        knuckles: proximal-joint pivots of fingers 1, 2, 3 (Barrett Aw = 25 mm,
-            A1 = 50 mm; fingers 1-2 on the -y side, finger 3 opposite).
-        outward: +1 / -1: the finger points along +y / -y when fully open.
-        proximal_size, distal_size: phalanx boxes (length along the phalanx, thickness
-            towards the grasp, width along the flexion axis).
-        proximal_angle: flexion of the proximal phalanx from fully open (flat in the palm
-            plane) towards +z [rad].
-        distal_angle: further flexion of the distal phalanx [rad]: Barrett's fixed 42 deg
-            distal offset plus 1/3 of the proximal angle (the 125 : 375 coupling).
-    """
-
-    base_mass: float = 0.60
-    finger_mass: float = 0.179
-    wrist_cylinder: tuple[float, float] = (0.045, 0.042)
-    spine_box: tuple[float, float, float] = (0.024, 0.108, 0.024)
-    palm_box: tuple[float, float, float] = (0.076, 0.046, 0.012)
-    knuckles: tuple[tuple[float, float, float], ...] = (
-        (-0.025, -0.05, 0.075), (0.025, -0.05, 0.075), (0.0, 0.05, 0.075))
-    outward: tuple[int, ...] = (-1, -1, 1)
-    proximal_size: tuple[float, float, float] = (0.070, 0.019, 0.019)
-    distal_size: tuple[float, float, float] = (0.055, 0.013, 0.019)
-    proximal_angle: float = float(np.deg2rad(60.0))  # ours: "half-open" (0-140 deg range)
-    distal_angle: float = float(np.deg2rad(42.0 + 60.0 / 3.0))
-
-    @property
-    def palm_height(self) -> float:
-        """Palm surface above the flange [m] (the ``hand_palm`` frame)."""
-        return self.wrist_cylinder[1] + self.spine_box[2] + self.palm_box[2]
-
-
-#: The hand placeholder (geometry from the facts sheet's BH8-280/282 figures, pose ours).
-BARRETT_PLACEHOLDER = BarrettPlaceholder()
 
 # ---------------------------------------------------------------------------- mini-robot
 
@@ -223,9 +184,12 @@ def _limits(q_deg: tuple[float, ...], qd_deg: tuple[float, ...],
 
 PA10_LIMITS = _limits(PA10_Q_LIMIT_DEG, PA10_QD_MAX_DEG_S, PA10_TAU_MAX)
 MINI_LIMITS = _limits(MINI_Q_LIMIT_DEG, MINI_QD_MAX_DEG_S, MINI_TAU_MAX)
-#: Limits of the nine joints, in the order of :data:`ALL_JOINTS`.
-ALL_LIMITS = _limits(PA10_Q_LIMIT_DEG + MINI_Q_LIMIT_DEG,
-                     PA10_QD_MAX_DEG_S + MINI_QD_MAX_DEG_S, PA10_TAU_MAX + MINI_TAU_MAX)
+_ARM_MINI_LIMITS = _limits(PA10_Q_LIMIT_DEG + MINI_Q_LIMIT_DEG,
+                           PA10_QD_MAX_DEG_S + MINI_QD_MAX_DEG_S, PA10_TAU_MAX + MINI_TAU_MAX)
+#: Limits of the 17 joints, in the order of :data:`ALL_JOINTS` (the hand's:
+#: :data:`repro.sim.barrett.BH8_LIMITS`).
+ALL_LIMITS = JointLimits(*(getattr(_ARM_MINI_LIMITS, f) + getattr(BH8_LIMITS, f)
+                           for f in ("q_min", "q_max", "qd_max", "tau_max")))
 
 
 def pa10_urdf_path() -> Path:

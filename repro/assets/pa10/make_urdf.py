@@ -3,8 +3,10 @@
     .venv/bin/python repro/assets/pa10/make_urdf.py
 
 Kinematics, limits and masses come from :mod:`repro.sim.pa10` (ARTE's DH table and
-limits, the manufacturer's 7-DoF link masses, the Barrett placeholder and the mini-robot
-sizes); the link shapes and colours below are ours (README.md says why). Every link's
+limits, the manufacturer's 7-DoF link masses and the mini-robot sizes); the link shapes and
+colours below are ours (README.md says why). The Barrett BH8-282 on the flange is the
+standalone hand's tree (``repro/assets/barrett_bh8/make_urdf.py``, the suite's one hand
+model), its root ``bh8_base`` fixed on ``pa10_flange``. Every link's
 inertia is computed from its primitives, each of uniform density within the link (solid
 box / cylinder formulas plus the parallel-axis theorem); a link whose tensor is not
 diagonal in its own axes gets its inertial frame on the principal axes (PyBullet reads only
@@ -21,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from repro.assets.barrett_bh8 import make_urdf as bh8
 from repro.assets.urdf_primitives import (
     Body,
     Shape,
@@ -33,7 +36,6 @@ from repro.assets.urdf_primitives import (
 from repro.sim.pa10 import (
     ALL_JOINTS,
     ALL_LIMITS,
-    BARRETT_PLACEHOLDER,
     MINI_GEOMETRY,
     MINI_MASSES,
     PA10_FOREARM_ROLL_OFFSET,
@@ -65,7 +67,6 @@ BLACK = (0.08, 0.08, 0.08, 1.0)
 
 _M = PA10_LINK_MASSES
 _G = MINI_GEOMETRY
-_H = BARRETT_PLACEHOLDER
 
 # ours: PA-10 shapes sized like the real arm, guided by the collision primitives of
 # Choreonoid's PA10.body (base column r 0.115, arm tubes r 0.05-0.06, wrist r 0.035-0.045).
@@ -102,27 +103,6 @@ PA10_BODIES = (
 )
 
 
-def _hand_bodies() -> tuple[Body, ...]:
-    """The BH8-282 placeholder: base (wrist cylinder, spine, palm plate) and one box link
-    per phalanx (link x along the phalanx, y towards the grasp, z the flexion axis)."""
-    r, length = _H.wrist_cylinder
-    spine, palm = _H.spine_box, _H.palm_box
-    base = Body("hand_base", _H.base_mass, (
-        Shape("cylinder", (r, length), (0.0, 0.0, length / 2)),
-        Shape("box", spine, (0.0, 0.0, length + spine[2] / 2)),
-        Shape("box", palm, (0.0, 0.0, length + spine[2] + palm[2] / 2)),
-    ), DARK)
-    v_prox, v_dist = float(np.prod(_H.proximal_size)), float(np.prod(_H.distal_size))
-    m_prox = _H.finger_mass * v_prox / (v_prox + v_dist)
-    fingers = []
-    for k in range(1, 4):
-        for part, size, mass in (("proximal", _H.proximal_size, m_prox),
-                                 ("distal", _H.distal_size, _H.finger_mass - m_prox)):
-            fingers.append(Body(f"hand_finger{k}_{part}", mass,
-                                (Shape("box", size, (size[0] / 2, 0.0, 0.0)),), SILVER))
-    return (base, *fingers)
-
-
 def _mini_bodies() -> tuple[Body, ...]:
     """The RRR mini-robot (ours): clamp ring, arm + post + joint-2 servo, tube + joint-3
     servo, camera bracket, camera body (its frame at the optical centre)."""
@@ -153,9 +133,12 @@ def _mini_bodies() -> tuple[Body, ...]:
     )
 
 
-BODIES = PA10_BODIES + _hand_bodies() + _mini_bodies()
-#: Frame-only links (no mass, no geometry).
-FRAMES = ("pa10_flange", "hand_palm", "mini_camera_optical")
+BODIES = PA10_BODIES + _mini_bodies()
+#: Frame-only links (no mass, no geometry) of the arm and the mini-robot (the hand's:
+#: ``bh8.FRAMES``).
+FRAMES = ("pa10_flange", "mini_camera_optical")
+#: The fixed joint that mounts the hand's root ``bh8_base`` on the flange (identity).
+HAND_MOUNT_JOINT = "bh8_mount_joint"
 
 _I3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
@@ -183,31 +166,6 @@ def _pa10_joints() -> tuple[Joint, ...]:
     return tuple(joints)
 
 
-def _finger_rotation(outward: int, angle: float) -> np.ndarray:
-    """Rotation of a proximal phalanx frame in the hand frame: x along the phalanx
-    (``angle`` [rad] up from the outward direction), z the flexion axis, y towards the grasp."""
-    o, up = np.array([0.0, outward, 0.0]), np.array([0.0, 0.0, 1.0])
-    x = np.cos(angle) * o + np.sin(angle) * up
-    z = np.cross(o, up)
-    return np.column_stack([x, np.cross(z, x), z])
-
-
-def _hand_joints() -> tuple[Joint, ...]:
-    joints = [
-        Joint("hand_base_joint", "pa10_flange", "hand_base", (0.0, 0.0, 0.0)),
-        Joint("hand_palm_joint", "hand_base", "hand_palm", (0.0, 0.0, _H.palm_height)),
-    ]
-    c, s = np.cos(_H.distal_angle), np.sin(_H.distal_angle)
-    R_dist = ((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0))
-    for k, (knuckle, out) in enumerate(zip(_H.knuckles, _H.outward, strict=True), start=1):
-        joints.append(Joint(f"hand_finger{k}_proximal_joint", "hand_base",
-                            f"hand_finger{k}_proximal", knuckle,
-                            _tup(_finger_rotation(out, _H.proximal_angle))))
-        joints.append(Joint(f"hand_finger{k}_distal_joint", f"hand_finger{k}_proximal",
-                            f"hand_finger{k}_distal", (_H.proximal_size[0], 0.0, 0.0), R_dist))
-    return tuple(joints)
-
-
 def _mini_joints() -> tuple[Joint, ...]:
     # Camera frame in mini_link3: Rz(-90 deg): optical x = -y, optical y = +x (radially
     # outward at q = 0), optical z = +z (forward).
@@ -226,8 +184,9 @@ def _mini_joints() -> tuple[Joint, ...]:
 
 
 def joints() -> tuple[Joint, ...]:
-    """Every joint of the tree, parents first."""
-    return _pa10_joints() + _hand_joints() + _mini_joints()
+    """Every joint of the arm and the mini-robot, parents first (the hand's: ``bh8.joints``,
+    below :data:`HAND_MOUNT_JOINT`)."""
+    return _pa10_joints() + _mini_joints()
 
 
 def build_urdf() -> str:
@@ -241,6 +200,12 @@ def build_urdf() -> str:
         add_link(robot, bodies.get(j.child), j.child)
         add_joint(robot, j.name, j.parent, j.child, j.xyz, rpy_of(j.R), j.axis, ALL_LIMITS,
                   ALL_JOINTS.index(j.name) if j.axis is not None else -1)
+    # The Barrett BH8-282 (repro/assets/barrett_bh8, the suite's one hand model), its root on
+    # the flange: bh8_base = pa10_flange.
+    add_joint(robot, HAND_MOUNT_JOINT, "pa10_flange", "bh8_base", (0.0, 0.0, 0.0),
+              (0.0, 0.0, 0.0), None)
+    add_link(robot, bh8.base_body(), "bh8_base")
+    bh8.add_hand_tree(robot, ALL_LIMITS, ALL_JOINTS)
     return urdf_text(robot)
 
 
