@@ -6,12 +6,14 @@ baselines the paper argues for without showing them: experiment 2 without the se
 task, and experiment 1 with an indirect (kinematic) visual servo of the mini-robot.
 Experiment 3: the Barrett hand (fixed base: the PA-10 is still while manipulating) grasps a
 cylinder and moves it under Algorithm 1, and the same trajectory without tactile control.
+The whole task of Table 1: the approach, then the manipulation with the hand on the PA-10.
 """
 
 from __future__ import annotations
 
 from experiments.pomares2011 import config as _c
 from experiments.pomares2011 import exp3 as _e3
+from experiments.pomares2011 import task as _task
 from experiments.pomares2011.run import check_config, run
 from repro.runs.registry import Experiment, Paper, lazy
 
@@ -36,6 +38,10 @@ EXPERIMENTS = Paper(
         Experiment("exp3_no_tactile", "pomares2011", "ablation: the same trajectory without "
                    "tactile control", _e3.Exp3NoTactileConfig, _e3.run,
                    check=_e3.check_config),
+        Experiment("task", "pomares2011", "Table 1: the whole task in one run: the approach "
+                   "(RVC, hybrid VS, hand idle), then the manipulation (PA-10 still, hybrid VS, "
+                   "Algorithm 1) with the hand on the PA-10", _task.TaskConfig, _task.run,
+                   check=_task.check_config),
     ),
     figures=lazy("experiments.pomares2011.figures", "make_figures"),
     claims=lazy("experiments.pomares2011.claims", "CLAIMS"),

@@ -72,7 +72,7 @@ from repro.sensors.tactile import (
 from repro.sim import barrett as B
 from repro.sim.barrett import BarrettHandDrive, FingerMotors
 from repro.sim.episode import Episode, Observation, StepResult, View, run_episode
-from repro.sim.robot import Robot
+from repro.sim.robot import JointSet, Robot
 from repro.sim.scene import Part, Scene, pose_json
 from repro.sim.world import World, WorldConfig, pb_to_pose, pose_to_pb
 
@@ -186,6 +186,11 @@ def check_config(config: Exp3Config) -> None:
         raise ConfigError(f"log_every = {config.log_every} must divide tactile_period_ms = "
                           f"{config.tactile_period_ms} (every Algorithm-1 tick is then a trace "
                           "row)")
+    check_manipulation(config)
+
+
+def check_manipulation(config: Exp3Config) -> None:
+    """The checks of the manipulation's fields (experiment 3 and the whole task)."""
     for f, (s, r) in enumerate(zip(config.safety_threshold_kpa, config.readjust_threshold_kpa,
                                    strict=True)):
         if s > r:
@@ -347,12 +352,16 @@ class GraspAudit:
 
     name = "grasp_audit"
 
-    def __init__(self, scene: Scene, hand: Robot, cylinder: str, support: str,
-                 reference_now: Callable[[], bool], lost_after: int = 33) -> None:
+    def __init__(self, scene: Scene, hand: Robot, cylinder: str, support: str | tuple[str, ...],
+                 reference_now: Callable[[], bool], lost_after: int = 33,
+                 dist_of: JointSet | None = None) -> None:
         self.scene, self.hand = scene, hand
         self.cyl = scene[cylinder].ids[0]
-        self.cylinder, self.support = cylinder, support
-        self.support_id = scene[support].ids[0]
+        self.cylinder = cylinder
+        self.supports = (support,) if isinstance(support, str) else tuple(support)
+        self.support_ids = [scene[s].ids[0] for s in self.supports]
+        #: whose distances the hand_dist_* columns are (default: the whole hand body)
+        self.dist_of: JointSet = hand if dist_of is None else dist_of
         self.reference_now = reference_now
         palm = self.palm = hand.pb_link_index("bh8_palm")
         self.link_owner: dict[int, str] = {}
@@ -396,8 +405,9 @@ class GraspAudit:
         force = dict.fromkeys([f"finger{k}" for k in FINGERS] + ["palm", "other"], 0.0)
         for cp in p.getContactPoints(bodyA=self.cyl, bodyB=self.hand.body, physicsClientId=c):
             force[self.link_owner.get(cp[4], "other")] += float(cp[9])
-        on_support = len(p.getContactPoints(bodyA=self.cyl, bodyB=self.support_id,
-                                            physicsClientId=c)) > 0
+        on_support = any(len(p.getContactPoints(bodyA=self.cyl, bodyB=sid,
+                                                physicsClientId=c)) > 0
+                         for sid in self.support_ids)
         touching = tuple(force[f"finger{k}"] > 0.0 for k in FINGERS)
         for k in FINGERS:
             cols[f"contact{k}"] = touching[k - 1]
@@ -408,10 +418,10 @@ class GraspAudit:
         cols["F_raw_palm"] = force["palm"]
         cols["F_raw_other"] = force["other"]
         cols["F_raw_total"] = float(sum(force.values()))
-        dists = self.scene.distances(self.hand)
-        for body in (self.cylinder, self.support):
+        dists = self.scene.distances(self.dist_of)
+        for body in (self.cylinder, *self.supports):
             cols[f"hand_dist_{body}"] = dists[body]
-        cols["hand_dist_min"] = cols[f"hand_dist_{self.support}"]
+        cols["hand_dist_min"] = min(dists[b] for b in self.supports)
         dropped = bool(self.T_ref is not None and not any(touching) and force["palm"] == 0.0
                        and not on_support and cols["obj_disp"] > DROP_M)
         cols["dropped"] = dropped
@@ -460,10 +470,11 @@ PHASES = {
 DECISIONS = ("", "ok", "readjust", "readjust_blocked_torque", "give_up_continue", "stop")
 
 
-def declare_columns(hand_joints: bool = True) -> Columns:
+def declare_columns(hand_joints: bool = True, supports: tuple[str, ...] = ("support",)
+                    ) -> Columns:
     """The experiment's own columns (the runner adds ``t``, ``motor_*``, the pose columns of
     the cylinder and the support; the tactile sensor its ``tac_*``); ``hand_joints``: also
-    ``hand_q{i}`` (False: someone else declares them)."""
+    ``hand_q{i}`` (False: someone else declares them); ``supports``: the support bodies."""
     cols = Columns()
     cols.add("phase", "text", "controller phase: " + "; ".join(f"{k}: {v}"
                                                                 for k, v in PHASES.items()))
@@ -532,8 +543,8 @@ def declare_columns(hand_joints: bool = True) -> Columns:
     cols.add("F_raw_other", "N", audit + "normal force other hand links - cylinder", audit=True)
     cols.add("F_raw_total", "N", audit + "sum of every normal force between the hand and the "
              "cylinder (compare Fmap_total, from the pressure maps)", audit=True)
-    for body in ("cylinder", "support", "min"):
-        what = ("minimum over the obstacles (the support)" if body == "min" else
+    for body in ("cylinder", *supports, "min"):
+        what = ("minimum over the obstacles (the supports)" if body == "min" else
                 f"minimum distance between the whole hand and {body}")
         cols.add(f"hand_dist_{body}", "m", audit + what + " (PyBullet closest points; < 0 "
                  "penetration)", audit=True)

@@ -1,5 +1,6 @@
 """pomares2011 figures from the traces: experiment 1 (Figs. 5-7), experiment 2 (Figs. 8-10)
-and the two baselines (no secondary task; indirect visual servo)."""
+and the two baselines (no secondary task; indirect visual servo); experiment 3's and the whole
+task's from their modules."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import pandas as pd  # noqa: E402
 
 from experiments.pomares2011.columns import N_POINTS  # noqa: E402
 from experiments.pomares2011.exp3_figures import make_exp3_figures  # noqa: E402
+from experiments.pomares2011.task_figures import make_task_figures  # noqa: E402
 from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
 from repro.runs.trace import RunFiles, load_run_if_present  # noqa: E402
 
@@ -195,4 +197,5 @@ def make_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
         fig = indirect_baseline(exp1, ind)
         written += save_figure(fig, figures_dir, PAPER, "baseline_indirect")
         plt.close(fig)
-    return written + make_exp3_figures(Path(results_dir), Path(figures_dir))
+    return (written + make_exp3_figures(Path(results_dir), Path(figures_dir))
+            + make_task_figures(Path(results_dir), Path(figures_dir)))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from repro.control.rvc import learn_desired_features, rvc_features, rvc_joint_ve
 from repro.errors import ConfigError, SensorError
 from repro.geometry import inv_T
 from repro.planning.capsules import Capsule, capsule_closest_points, min_distance
-from repro.sensors.camera import Camera
+from repro.sensors.camera import Camera, check_scene_colors
 from repro.sim import barrett as B
 from repro.sim.drives import PositionReferenceDrive, TorqueDrive, VelocityDrive
 from repro.sim.episode import CameraRig, Episode, Observation, StepResult, View, run_episode
@@ -124,7 +124,8 @@ class Learned(NamedTuple):
     vvs_pos_err_m: float  # audit: VVS position error vs the true object pose
 
 
-def learn_s_u_star(scene: Scene, chain: Robot, rig: CameraRig) -> Learned:
+def learn_s_u_star(scene: Scene, chain: Robot, rig: CameraRig, layout: sc.Layout = sc.LAYOUT
+                   ) -> Learned:
     """s_u* by the learning stage: the robot placed at its goal configuration
     (:data:`scene.Q_GOAL`), one camera frame (rendered and detected like every frame of the
     run), the object pose by PnP + VVS (22)-(24), M_O^RVC from the kinematics, and the
@@ -135,7 +136,7 @@ def learn_s_u_star(scene: Scene, chain: Robot, rig: CameraRig) -> Learned:
         SensorError: the camera does not see the four dots at the goal, or no pose is found.
     """
     q0 = chain.q()
-    chain.reset(np.asarray(sc.Q_GOAL, float))
+    chain.reset(np.asarray(layout.q_goal, float))
     try:
         body = scene[rig.target]
         assert body.dot_target is not None
@@ -152,7 +153,7 @@ def learn_s_u_star(scene: Scene, chain: Robot, rig: CameraRig) -> Learned:
         q = chain.q()
         T_world_rvc = chain.frame_pose("pa10_flange", q) @ sc.T_FLANGE_RVC
         T_rvc_obj = inv_T(T_world_rvc) @ T_wc @ res.T_cam_obj  # M_O^RVC at the goal
-        s_u = learn_desired_features(sc.RVC_INTRINSICS, T_rvc_obj, sc.POINTS_U)
+        s_u = learn_desired_features(sc.RVC_INTRINSICS, T_rvc_obj, layout.points_u)
         T_true = inv_T(T_wc) @ sc.OBJECT.T_world
         err = float(np.linalg.norm(res.T_cam_obj[:3, 3] - T_true[:3, 3]))
         return Learned(np.asarray(s_u), uv, float(res.residual_px), err)
@@ -169,12 +170,16 @@ class Pomares2011Controller:
     def __init__(self, config: Pomares2011Config, chain: Robot, arm: JointGroup,
                  mini: JointGroup, human: _Bones | None = None,
                  s_u_star: np.ndarray | None = None,
-                 hand_hold: np.ndarray | None = None) -> None:
+                 hand_hold: np.ndarray | None = None, layout: sc.Layout = sc.LAYOUT) -> None:
         self.config, self.chain, self.arm, self.mini = config, chain, arm, mini
+        #: the goal, the desired features s* and the RVC's points P_u (experiments 1-2: the
+        #: paper's; the whole task: its own, scene.Layout)
+        self.layout = layout
+        self.s_star = np.asarray(layout.s_star, dtype=float)
         self.hand_hold = np.full(3, sc.HAND_APPROACH_MOTOR) if hand_hold is None else (
             np.asarray(hand_hold, dtype=float))
         #: the RVC's desired features [px]: the learning stage's (default: the paper's)
-        self.s_u_star = np.asarray(sc.S_U_STAR if s_u_star is None else s_u_star, float)
+        self.s_u_star = np.asarray(layout.s_u_star if s_u_star is None else s_u_star, float)
         self.human = human
         self.rng = np.random.default_rng(config.seed)
         self.T_mc_obj: np.ndarray | None = None
@@ -195,12 +200,12 @@ class Pomares2011Controller:
         g = gains_from_inertia(M, L_px @ J_g, cfg.omega_max, cfg.zeta)
         alpha = cfg.push_force * cfg.dmin / g.k_P
         K_v_active = 2.0 * cfg.zeta * cfg.avoid_omega * 0.5 * (M + M.T)
-        self.hybrid = HybridVSController(HybridVSConfig(sc.S_STAR.ravel(), g.k_P, g.K_v, alpha,
+        self.hybrid = HybridVSController(HybridVSConfig(self.s_star.ravel(), g.k_P, g.K_v, alpha,
                                                         cfg.dmin, K_v_active=K_v_active))
         if cfg.mini_controller == "indirect":
             pd = pd_gains_from_inertia(M, cfg.omega_max, cfg.zeta)
             self.indirect = IndirectVSController(IndirectVSConfig(
-                sc.S_STAR.ravel(), cfg.indirect_gain, pd.K_p, pd.K_d,
+                self.s_star.ravel(), cfg.indirect_gain, pd.K_p, pd.K_d,
                 np.asarray(self.mini.limits.qd_max), 1.0 / cfg.physics_rate,
                 np.asarray(self.mini.limits.q_min), np.asarray(self.mini.limits.q_max)))
 
@@ -216,7 +221,7 @@ class Pomares2011Controller:
         T_world_rvc = self.chain.frame_pose("pa10_flange", q) @ sc.T_FLANGE_RVC
         T_world_mc = self.chain.frame_pose("mini_camera_optical", q)
         T_rvc_obj = inv_T(T_world_rvc) @ T_world_mc @ res.T_cam_obj  # M_O^RVC (Sec. 5.1)
-        feats = rvc_features(sc.RVC_INTRINSICS, T_rvc_obj, sc.POINTS_U)  # (19)-(21)
+        feats = rvc_features(sc.RVC_INTRINSICS, T_rvc_obj, self.layout.points_u)  # (19)-(21)
         e_u = float(np.sqrt(np.mean(np.sum((feats.uv - self.s_u_star) ** 2, axis=1))))
         if not self.arm_reached and e_u < self.config.arm_stop_px:
             self.arm_reached = True  # s_u* reached: the approach is over, the arm stays
@@ -231,7 +236,7 @@ class Pomares2011Controller:
                                              np.asarray(self.arm.limits.qd_max), "scale")  # (18)
         T_true = inv_T(T_world_mc) @ sc.OBJECT.T_world  # audit: the true object pose
         true_u = rvc_features(sc.RVC_INTRINSICS, inv_T(T_world_rvc) @ sc.OBJECT.T_world,
-                              sc.POINTS_U).uv  # audit: s_u with the true object pose
+                              self.layout.points_u).uv  # audit: s_u with the true pose
         cols: dict[str, float | int | bool] = {
             "vvs_iter": res.iterations, "vvs_residual_px": res.residual_px,
             "vvs_converged": res.converged,
@@ -317,7 +322,7 @@ class Pomares2011Controller:
         else:  # the baseline has no secondary task; V (10) with the direct gain, to compare
             tau, _ = self.indirect.step(q[self.mini.idx], obs.qd["mini"], f.uv.ravel(), L_px,
                                         J_g, G, M)
-            diag = {"V": lyapunov(obs.qd["mini"], M, sc.S_STAR.ravel() - f.uv.ravel(),
+            diag = {"V": lyapunov(obs.qd["mini"], M, self.s_star.ravel() - f.uv.ravel(),
                                   self.hybrid.config.k_P), "e2": 0.0, "active": False}
         active = bool(diag["active"])
         if active != self.was_active and hd is not None:
@@ -325,25 +330,43 @@ class Pomares2011Controller:
                            f"dist = {hd.dist:.3f} m {'<' if active else '>='} dmin = "
                            f"{self.config.dmin} m ({hd.pair})"))
         self.was_active = active
-        e_y = float(f.uv[0, 1] - sc.S_STAR[0, 1])
+        e_y = float(f.uv[0, 1] - self.s_star[0, 1])
         flange = self.chain.frame_pose("pa10_flange", q)[:3, 3]
         cols: dict[str, float | int | str | bool] = dict(self.rvc_cols)
         cols.update(V=diag["V"], e_s_px=float(np.sqrt(np.mean(np.sum(
-            (f.uv - sc.S_STAR) ** 2, axis=1)))), e_f1y_px=e_y, e2=diag["e2"],
+            (f.uv - self.s_star) ** 2, axis=1)))), e_f1y_px=e_y, e2=diag["e2"],
             secondary_active=active, flange_x=flange[0], flange_y=flange[1],
             flange_z=flange[2], **cols_h, **hand_joint_values(q[HAND_IDX]))
         return StepResult({"arm": self.qd_arm, "mini": tau, "fingers": self.hand_hold.copy()},
                           cols, events)
 
 
-def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares2011Controller]:
-    """The scene (robot, table, part, dots), the drives, the camera and the controller."""
-    check_config(config)
+class ApproachParts(NamedTuple):
+    """The pieces of a pomares2011 run that the whole task shares (:func:`build_parts`)."""
+
+    scene: Scene
+    chain: Robot
+    drives: dict[str, Any]
+    rig: CameraRig
+    ctrl: Pomares2011Controller
+    movers: dict[str, Callable[[float], np.ndarray]]
+
+
+def build_parts(config: Pomares2011Config, out_dir: Path,
+                extra_bodies: Callable[[Scene], None] | None = None,
+                layout: sc.Layout = sc.LAYOUT) -> ApproachParts:
+    """The scene (robot, table, part, dots, the human if any), the drives (PA-10, mini-robot,
+    hand), the camera, the learning stage and the controller. ``extra_bodies`` adds the
+    caller's bodies to the scene before the learning stage (it renders a frame); ``layout``
+    the start, the goal and the desired features (default: experiments 1-2)."""
     dt = 1.0 / config.physics_rate
     scene = Scene(WorldConfig(physics_dt=dt, control_dt=dt),
                   render=config.camera_mode == "render", run_dir=out_dir)
     human = sc.human_motion() if config.human else None
-    chain, bodies = sc.build_scene(scene, sc.Q_START, human=human)
+    chain, bodies = sc.build_scene(scene, layout.q_start, human=human)
+    if extra_bodies is not None:
+        extra_bodies(scene)
+        scene.check_colors(check_scene_colors)
     arm = scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True)
     mini = scene.add_joint_group("pa10", "mini", MINI_JOINTS, "mini_")
     hand_drive = add_hand(scene, chain)
@@ -353,19 +376,20 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
                     "the Reference Virtual Camera (virtual: nothing is rendered)")
     rig = CameraRig("camera", "s", Camera(sc.INTRINSICS, mode=config.camera_mode), chain,
                     "mini_camera_optical", np.eye(4), "dots", period=config.camera_period)
-    learned = learn_s_u_star(scene, chain, rig)  # Sec. 5.1 step (4), before the run
+    learned = learn_s_u_star(scene, chain, rig, layout)  # Sec. 5.1 step (4), before the run
     bones = _Bones(human) if human is not None else None
-    ctrl = Pomares2011Controller(config, chain, arm, mini, bones, learned.s_u_star)
-    scene.extra.update(s_star_px=sc.S_STAR, s_u_star_px=learned.s_u_star,
-                       s_u_star_paper_px=sc.S_U_STAR,
+    ctrl = Pomares2011Controller(config, chain, arm, mini, bones, learned.s_u_star,
+                                 layout=layout)
+    scene.extra.update(s_star_px=layout.s_star, s_u_star_px=learned.s_u_star,
+                       s_u_star_paper_px=sc.S_U_STAR, layout=layout.name,
                        s_u_star_learning={
                            "what": "s_u_star_px is learned before the run (pomares2011 Sec. "
                                    "5.1 step 4): the robot at q_goal, one camera frame, PnP + "
                                    "VVS object pose, P_u projected through the RVC",
-                           "q": sc.Q_GOAL, "detected_uv_px": learned.uv_goal,
+                           "q": layout.q_goal, "detected_uv_px": learned.uv_goal,
                            "vvs_residual_px": learned.vvs_residual_px,
                            "vvs_pos_err_m": learned.vvs_pos_err_m},
-                       points_u_object=sc.POINTS_U, q_goal=sc.Q_GOAL,
+                       points_u_object=layout.points_u, q_goal=layout.q_goal,
                        rvc={"mount": "rvc", "intrinsics": "same as the camera's"},
                        mini_capsules=[{"link": link, "p0": p0, "p1": p1, "radius": r}
                                       for link, p0, p1, r in MINI_CAPSULES],
@@ -377,12 +401,23 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
                                 "floor_z_m": sc.FLOOR_Z}
         for name, _ in human.capsules(0.0):
             movers[bodies.prefix + name] = bones.pose(name)
-    ep = Episode(scene, {"arm": _arm_drive(arm, config.arm_drive), "mini": TorqueDrive(mini),
-                         "fingers": hand_drive}, ctrl,
-                 declare_columns(config.human), config.duration, cameras=[rig],
-                 movers=movers, video=config.video, video_every=33,
-                 view=View((0.5, -0.3, 0.3), 2.0, 20, -25), log_every=config.log_every)
-    return ep, ctrl
+    drives = {"arm": _arm_drive(arm, config.arm_drive), "mini": TorqueDrive(mini),
+              "fingers": hand_drive}
+    return ApproachParts(scene, chain, drives, rig, ctrl, movers)
+
+
+#: The third-person view of the videos and snapshots of experiments 1-2 and the task.
+VIEW = View((0.5, -0.3, 0.3), 2.0, 20, -25)
+
+
+def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares2011Controller]:
+    """The scene (robot, table, part, dots), the drives, the camera and the controller."""
+    check_config(config)
+    parts = build_parts(config, out_dir)
+    ep = Episode(parts.scene, parts.drives, parts.ctrl, declare_columns(config.human),
+                 config.duration, cameras=[parts.rig], movers=parts.movers, video=config.video,
+                 video_every=33, view=VIEW, log_every=config.log_every)
+    return ep, parts.ctrl
 
 
 def add_hand(scene: Scene, chain: Robot) -> B.BarrettHandDrive:

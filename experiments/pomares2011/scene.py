@@ -257,6 +257,31 @@ POINTS_U = backproject_to_plane(RVC_INTRINSICS, _GOAL_FRAMES["rvc"], S_U_STAR,
                                 OBJECT.T_world, OBJECT.top_z)
 POINTS_U.setflags(write=False)
 
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """Where a pomares2011 run starts and ends and what it wants to see there.
+
+    Attributes:
+        name: "exp1" (experiments 1-2 and their baselines) or "task" (the whole task).
+        q_start, q_goal: (17,) ALL_JOINTS order [rad].
+        s_star: (4, 2) desired features of the mini-robot camera [px] (the exact
+            projections of the dots at ``q_goal``).
+        s_u_star: (4, 2) the RVC's desired features [px] (before the learning stage
+            re-learns them).
+        points_u: (4, 3) the RVC's characteristic points P_u in {o} [m].
+    """
+
+    name: str
+    q_start: np.ndarray
+    q_goal: np.ndarray
+    s_star: np.ndarray
+    s_u_star: np.ndarray
+    points_u: np.ndarray
+
+
+#: Experiments 1-2: the paper's s*, s_u*.
+LAYOUT = Layout("exp1", Q_START, Q_GOAL, S_STAR, S_U_STAR, POINTS_U)
+
 #: Every body other than the dots and their colours (the robot is not in the render world).
 SCENE_RGBA: dict[str, tuple[float, float, float, float]] = {
     "table": TABLE.rgba, "object": OBJECT.rgba}
