@@ -323,7 +323,14 @@ def test_joint_groups_of_one_urdf_have_their_own_drives_columns_and_distances(
     """pomares2011's layout: one URDF (PA-10 + mini-robot), the PA-10 under a velocity drive,
     the mini-robot under torque (gravity compensation), a camera every 5 control steps."""
     from repro.geometry import Rx
-    from repro.sim.pa10 import ALL_JOINTS, ALL_LIMITS, MINI_JOINTS, PA10_JOINTS, pa10_urdf_path
+    from repro.sim.pa10 import (
+        ALL_JOINTS,
+        ALL_LIMITS,
+        HAND_JOINTS,
+        MINI_JOINTS,
+        PA10_JOINTS,
+        pa10_urdf_path,
+    )
     from repro.sim.robot import JointGroup
 
     scene = _scene(tmp_path, 1e-3, 1e-3, render=True)
@@ -332,6 +339,7 @@ def test_joint_groups_of_one_urdf_have_their_own_drives_columns_and_distances(
     chain.reset(q0)
     arm = scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True)
     mini = scene.add_joint_group("pa10", "mini", MINI_JOINTS, "mini_")
+    hand = scene.add_joint_group("pa10", "hand", HAND_JOINTS, "bh8_")  # no drive: observed
     assert isinstance(mini, JointGroup)
     assert set(arm.links).isdisjoint(mini.links) and -1 in arm.links and mini.links
     T_cam = chain.frame_pose("mini_camera_optical", q0)
@@ -365,9 +373,19 @@ def test_joint_groups_of_one_urdf_have_their_own_drives_columns_and_distances(
     held = df["s1_u"].to_numpy()
     assert np.all(held[1:5] == held[0]) and held[5] != held[0]  # held between frames
     body = json.loads((tmp_path / "scene.json").read_text())["bodies"][0]
-    assert body["q_columns"] == [f"pa10_q{i}" for i in range(1, 7)] + ["mini_q1", "mini_q2",
-                                                                          "mini_q3"] + [""] * 8
-    assert [g["name"] for g in body["groups"]] == ["arm", "mini"]
+    assert body["q_columns"] == ([f"pa10_q{i}" for i in range(1, 7)]
+                                 + ["mini_q1", "mini_q2", "mini_q3"]
+                                 + [f"bh8_q{i}" for i in range(1, 9)])
+    assert [g["name"] for g in body["groups"]] == ["arm", "mini", "hand"]
+    # the group without a drive: its joints and its distances logged by the runner, and no
+    # command columns
+    assert {"bh8_q8", "bh8_qd8", "bh8_dist_box", "bh8_dist_min"} <= set(df.columns)
+    assert "bh8_u1" not in df and "bh8_n_sat" not in df
+    assert df["bh8_q2"].iloc[0] == pytest.approx(q0[10], abs=1e-12)
+    np.testing.assert_allclose(df[[f"bh8_q{i}" for i in range(1, 9)]].iloc[0], q0[9:],
+                               atol=1e-12)
+    assert len(hand.links) > 0 and np.isfinite(df["bh8_qd8"]).all()
+    assert df["bh8_dist_box"].iloc[0] != df["mini_dist_box"].iloc[0]  # over its own links
     assert set(body["groups"][1]["links"]) == set(mini.links)
 
 

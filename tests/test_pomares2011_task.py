@@ -133,7 +133,7 @@ def test_short_run_switches_phase_once_when_the_arm_stops(tmp_path: Path) -> Non
     """Before the RVC reaches arm_stop_px the finger motors hold the approach pose and the
     hand waits; at that very step the PA-10's commands become 0 for good and the hand begins
     (pre-shape at its speed, then closing); every Algorithm-1-rate tactile sample is a row;
-    the hand's joints are logged (hand_q)."""
+    the hand's joints are logged by the runner (bh8_q, a joint group without a drive)."""
     run = load_run(T.run(short_config(), tmp_path / "task"))
     df, ev = run.trace, run.events
     reached = ev[ev["kind"] == "rvc_reached"]
@@ -154,7 +154,9 @@ def test_short_run_switches_phase_once_when_the_arm_stops(tmp_path: Path) -> Non
     assert np.all(pa10_u == 0.0)
     assert np.abs(before[[f"pa10_u{i}" for i in range(1, 7)]].to_numpy(float)).max() > 1e-3
     assert not df["tick"].astype(bool).any()  # no trajectory in 2.5 s: no Algorithm-1 tick
-    assert {f"hand_q{i}" for i in range(1, len(HAND_JOINTS) + 1)} <= set(df.columns)
+    assert {f"bh8_q{i}" for i in range(1, len(HAND_JOINTS) + 1)} <= set(df.columns)
+    assert {"bh8_dist_cylinder", "bh8_dist_min", "hand_dist_cylinder"} <= set(df.columns)
+    assert not any(c.startswith("hand_q") for c in df.columns)
     assert run.manifest["status"] == "completed"
     assert len(ALL_JOINTS) == 17
 

@@ -3,7 +3,8 @@
 The runner adds its own: ``pa10_q{i}``/``pa10_qd{i}``/``pa10_u{i}`` (the PA-10: joint
 velocity commands [rad/s]), ``mini_q{i}``/``mini_qd{i}``/``mini_u{i}`` (the mini-robot:
 joint torques [N m]), ``motor_q{i}``/``motor_qd{i}``/``motor_u{i}`` (the hand's three finger
-motors: motor angle targets [rad]), the camera's points ``s{i}_*`` with their audit,
+motors: motor angle targets [rad]), ``bh8_q{i}``/``bh8_qd{i}`` (the hand's joints, observed),
+the camera's points ``s{i}_*`` with their audit,
 ``*_dist_*``.
 """
 
@@ -71,4 +72,4 @@ def declare_columns(human: bool = False) -> Columns:
                  "(no tracking noise)", audit=True)
         cols.add("dist_pair", "-", "closest pair of dist_m: <mini-robot capsule>|<human "
                  "capsule>")
-    return declare_hand_joint_columns(cols)
+    return cols

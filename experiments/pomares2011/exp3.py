@@ -569,7 +569,8 @@ class Exp3Controller:
 
     def __init__(self, config: Exp3Config, preshape: np.ndarray, plan: np.ndarray,
                  hand_body: str = "hand", hand_idx: np.ndarray | None = None,
-                 start: np.ndarray | None = None, preshape_rate: float = 0.0) -> None:
+                 start: np.ndarray | None = None, preshape_rate: float = 0.0,
+                 hand_columns: bool = True) -> None:
         self.config = config
         self.plan = np.asarray(plan, dtype=float)
         self.dy = planned_dy(config)
@@ -580,6 +581,8 @@ class Exp3Controller:
         self.preshape = np.asarray(preshape, dtype=float).copy()
         #: the pre-shaping speed of every motor [rad/s] (phase ``preshape``)
         self.preshape_rate = float(preshape_rate)
+        #: write ``hand_q{i}`` (False: the runner logs the hand's joints, a joint group)
+        self.hand_columns = hand_columns
         if start is None:  # experiment 3: the fingers start pre-shaped, closing
             self.targets, self.phase = self.preshape.copy(), "closing"
         else:  # the whole task: the fingers hold ``start`` until begin()
@@ -752,7 +755,8 @@ class Exp3Controller:
                  ) -> dict[str, float | int | str | bool]:
         reading: TactileReading = obs.sensors["tactile"]
         cols: dict[str, float | int | str | bool] = {"phase": self.phase, "tick": tick}
-        cols.update(hand_joint_values(obs.q[self.hand_body][self.hand_idx]))
+        if self.hand_columns:
+            cols.update(hand_joint_values(obs.q[self.hand_body][self.hand_idx]))
         for i in range(N_FINGERS):
             cols[f"counts{i + 1}"] = B.motor_angle_to_counts(float(obs.q["fingers"][i]))
             cols[f"cmd_counts{i + 1}"] = B.motor_angle_to_counts(float(self.targets[i]))

@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from experiments.pomares2011 import scene as sc
-from experiments.pomares2011.columns import declare_columns, hand_joint_values
+from experiments.pomares2011.columns import declare_columns
 from experiments.pomares2011.config import Pomares2011Config
 from repro.config import validate
 from repro.control.hybrid_vs import (
@@ -283,7 +283,6 @@ class Pomares2011Controller:
                 tau, e2 = self.hybrid.avoid_only(obs.qd["mini"], J_g, G, hd.dist, hd.grad)
                 cols = {**cols, "e2": e2}
             cols = {**cols, "secondary_active": bool(active)}
-        cols = {**cols, **hand_joint_values(q[HAND_IDX])}
         return StepResult({"arm": np.zeros(self.arm.n), "mini": tau,
                            "fingers": self.hand_hold.copy()}, dict(cols), events, fallback=True)
 
@@ -303,8 +302,7 @@ class Pomares2011Controller:
         if self.T_mc_obj is None:
             return StepResult({"arm": np.zeros(self.arm.n), "mini": self.mini.gravity_torques(),
                                "fingers": self.hand_hold.copy()},
-                              dict(hand_joint_values(q[HAND_IDX])),
-                              [("no_pose", "PnP found no object pose: waiting")], fallback=True)
+                              {}, [("no_pose", "PnP found no object pose: waiting")], fallback=True)
         P_c = sc.POINTS_P @ self.T_mc_obj[:3, :3].T + self.T_mc_obj[:3, 3]
         L_px = pixel_interaction_matrix(f.uv, P_c[:, 2])  # depths from the VVS pose
         if self.hybrid is None:
@@ -336,7 +334,7 @@ class Pomares2011Controller:
         cols.update(V=diag["V"], e_s_px=float(np.sqrt(np.mean(np.sum(
             (f.uv - self.s_star) ** 2, axis=1)))), e_f1y_px=e_y, e2=diag["e2"],
             secondary_active=active, flange_x=flange[0], flange_y=flange[1],
-            flange_z=flange[2], **cols_h, **hand_joint_values(q[HAND_IDX]))
+            flange_z=flange[2], **cols_h)
         return StepResult({"arm": self.qd_arm, "mini": tau, "fingers": self.hand_hold.copy()},
                           cols, events)
 
@@ -421,11 +419,12 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
 
 
 def add_hand(scene: Scene, chain: Robot) -> B.BarrettHandDrive:
-    """The BH8-282 on the flange as the scene's joint group ``hand`` (its joints' q columns
-    ``hand_q{i}``) and its three finger motors (:class:`repro.sim.barrett.FingerMotors`,
+    """The BH8-282 on the flange as the scene's joint group ``hand`` (no drive of its own: the
+    runner logs its joints ``bh8_q{i}``, ``bh8_qd{i}`` and distances ``bh8_dist_*``) and its
+    three finger motors (:class:`repro.sim.barrett.FingerMotors`,
     columns ``motor_*``) driven through the gear constraints and the TorqueSwitch
     (:class:`repro.sim.barrett.BarrettHandDrive`), spread 0."""
-    scene.add_joint_group("pa10", "hand", HAND_JOINTS, "hand_")
+    scene.add_joint_group("pa10", "hand", HAND_JOINTS, "bh8_")
     couplings = B.add_coupling_constraints(chain.body, chain.client)
     drive = B.BarrettHandDrive(B.FingerMotors(chain), couplings)
     scene.extra["hand"] = {"model": "Barrett BH8-282 (repro/assets/barrett_bh8), root bh8_base "

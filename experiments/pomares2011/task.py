@@ -244,11 +244,12 @@ def build(config: TaskConfig, out_dir: Path) -> tuple[Episode, TaskController]:
     hand_ctrl = e3.Exp3Controller(config, preshape, plan, hand_body="pa10", hand_idx=HAND_IDX,
                                   start=np.full(3, sc.HAND_APPROACH_MOTOR),
                                   preshape_rate=B.J2_RATIO
-                                  * math.radians(config.preshape_speed_deg_s))
+                                  * math.radians(config.preshape_speed_deg_s),
+                                  hand_columns=False)
     ctrl = TaskController(parts.ctrl, hand_ctrl)
     # the grasp audit's distances: the hand's links (its joint group, plus the base and the
     # palm, which ride on the flange)
-    hand_links: JointGroup = copy.copy(_hand_group(scene))
+    hand_links: JointGroup = copy.copy(scene.joint_groups["hand"])
     hand_links.links = sorted(set(hand_links.links) | {chain.pb_link_index("bh8_base"),
                                                         chain.pb_link_index("bh8_palm")})
     audit = e3.GraspAudit(scene, chain, "cylinder", "support",
@@ -293,13 +294,6 @@ def build(config: TaskConfig, out_dir: Path) -> tuple[Episode, TaskController]:
                  video=config.video, video_every=33, view=VIEW,
                  snapshot_period=config.snapshot_period, log_every=config.log_every)
     return ep, ctrl
-
-
-def _hand_group(scene: Scene) -> JointGroup:
-    """The chain's joint group ``hand`` (added by :func:`run.add_hand`)."""
-    robot = scene["pa10"].robot
-    assert robot is not None
-    return JointGroup(robot, "hand", B.BH8_JOINTS, "hand_")
 
 
 def _lowered(T0: np.ndarray, hand: e3.Exp3Controller):  # type: ignore[no-untyped-def]

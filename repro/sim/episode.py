@@ -39,7 +39,7 @@ from repro.runs.columns import COLUMNS_FILE, Columns
 from repro.runs.trace import TraceRecorder
 from repro.sensors.camera import Camera, project_points, render_rgb
 from repro.sim.drives import Drive
-from repro.sim.robot import Robot
+from repro.sim.robot import JointSet, Robot
 from repro.sim.scene import DISTANCE_CAP, Scene, pose_columns, pose_json
 from repro.sim.world import pose_to_pb
 
@@ -214,11 +214,35 @@ class Episode:
 
 
 # ----------------------------------------------------------------------------- columns
+def undriven_groups(ep: Episode) -> dict[str, JointSet]:
+    """The scene's joint groups that no drive of ``ep`` commands, by name: the runner logs
+    their joints (``<prefix>q{i}``, ``qd{i}``) and their ground-truth distances."""
+    driven = {id(d.robot) for d in ep.drives.values()}
+    return {name: g for name, g in ep.scene.joint_groups.items() if id(g) not in driven}
+
+
+def _distance_columns(cols: Columns, ep: Episode, name: str, r: JointSet, pre: str) -> None:
+    for body in ep.scene.bodies.values():
+        if body.collision and body.robot is not getattr(r, "robot", r):
+            cols.add(f"{pre}dist_{body.name}", "m", f"ground truth: minimum distance "
+                     f"between the collision geometry of {name} and {body.name} (PyBullet "
+                     f"closest points, minimum over its parts; < 0 penetration; capped at "
+                     f"{DISTANCE_CAP} m)", audit=True)
+    cols.add(f"{pre}dist_min", "m", f"ground truth: minimum of {pre}dist_* over the "
+             "obstacles (bodies with obstacle = true in scene.json)", audit=True)
+
+
 def runner_columns(ep: Episode) -> Columns:
     """The columns the runner writes for ``ep`` (the paper declares the rest)."""
     cols = Columns()
     cols.add("t", "s", "simulated time at the start of the control step")
     cols.add("step", "-", "control step index (0-based)")
+    for name, group in undriven_groups(ep).items():  # observed only (e.g. an idle hand)
+        pre = group.column_prefix
+        cols.add(f"{pre}q{{i}}", "rad", f"measured position of {name} joint {{i}} (PyBullet "
+                 "joint state; no drive of its own)", n=group.n)
+        cols.add(f"{pre}qd{{i}}", "rad/s", f"measured velocity of {name} joint {{i}}", n=group.n)
+        _distance_columns(cols, ep, name, group, pre)
     for name, drive in ep.drives.items():
         r, pre, n = drive.robot, drive.robot.column_prefix, drive.robot.n
         # a joint set may be other than joints (a hand's finger motors): its own words
@@ -232,14 +256,7 @@ def runner_columns(ep: Episode) -> Columns:
                  f"the controller gave it (the drive applies it clipped to {clip})", n=n)
         cols.add(f"{pre}n_sat", "-", f"number of {name} {what}s whose command the drive "
                  f"clipped to {clip}")
-        for body in ep.scene.bodies.values():
-            if body.collision and body.robot is not getattr(r, "robot", r):
-                cols.add(f"{pre}dist_{body.name}", "m", f"ground truth: minimum distance "
-                         f"between the collision geometry of {name} and {body.name} (PyBullet "
-                         f"closest points, minimum over its parts; < 0 penetration; capped at "
-                         f"{DISTANCE_CAP} m)", audit=True)
-        cols.add(f"{pre}dist_min", "m", f"ground truth: minimum of {pre}dist_* over the "
-                 "obstacles (bodies with obstacle = true in scene.json)", audit=True)
+        _distance_columns(cols, ep, name, r, pre)
     for cam in ep.cameras:
         n = ep.scene[cam.target].dot_target.n_points  # type: ignore[union-attr]
         s = cam.prefix
@@ -331,6 +348,8 @@ class _Runner:
         self.ep, self.rec, self.out_dir = ep, rec, out_dir
         self.cols = runner_columns(ep).extend(ep.columns)
         self.robots = {name: d.robot for name, d in ep.drives.items()}
+        #: joint groups no drive commands: observed and logged only
+        self.observed = undriven_groups(ep)
         # the whole chains (cameras need every joint of the robot carrying them)
         self.chains = {getattr(r, "robot", r).name: getattr(r, "robot", r)
                        for r in self.robots.values()}
@@ -424,7 +443,7 @@ class _Runner:
 
     def ground_truth(self, t: float, k: int, row: dict[str, Scalar]) -> None:
         scene = self.ep.scene
-        for name, robot in self.robots.items():
+        for name, robot in {**self.observed, **self.robots}.items():
             pre = robot.column_prefix
             dists = scene.distances(robot)
             for body, d in dists.items():
@@ -526,6 +545,10 @@ class _Runner:
                     row[f"{pre}qd{i + 1}"] = float(qd[name][i])
                     row[f"{pre}u{i + 1}"] = float(u[i])
                 row[f"{pre}n_sat"] = int(np.sum(np.abs(applied - u) > 1e-12))
+            for group in self.observed.values():
+                pre = group.column_prefix
+                for i, (qi, qdi) in enumerate(zip(group.q(), group.qd(), strict=True)):
+                    row[f"{pre}q{i + 1}"], row[f"{pre}qd{i + 1}"] = float(qi), float(qdi)
             self.ground_truth(t, k, row)
             if k == 0:
                 self.cols.check(row)

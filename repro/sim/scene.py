@@ -204,6 +204,9 @@ class Scene:
         self.mirror: World | None = World(world_config) if render else None
         self.run_dir = Path(run_dir) if run_dir is not None else None
         self.bodies: dict[str, SceneBody] = {}
+        #: every joint group by name (:meth:`add_joint_group`); the runner logs the groups no
+        #: drive covers (positions, velocities, ground-truth distances)
+        self.joint_groups: dict[str, JointGroup] = {}
         self.mounts: dict[str, dict[str, Any]] = {}
         self.sensors: dict[str, dict[str, Any]] = {}
         self.extra: dict[str, Any] = {}
@@ -306,6 +309,7 @@ class Scene:
         by_joint = {j: f"{g['column_prefix']}q{g['joints'].index(j) + 1}"
                     for g in groups for j in g["joints"]}
         info["q_columns"] = [by_joint.get(j, "") for j in info["joints"]]
+        self.joint_groups[name] = group
         return group
 
     def _copy_urdf(self, src: Path, name: str) -> Path:
