@@ -46,14 +46,14 @@ from experiments.pomares2011 import exp3 as e3
 from experiments.pomares2011 import scene as sc
 from experiments.pomares2011.columns import declare_columns as approach_columns
 from experiments.pomares2011.config import Pomares2011Config
-from experiments.pomares2011.run import HAND_IDX, VIEW, Pomares2011Controller, build_parts
+from experiments.pomares2011.run import HAND_IDX, Pomares2011Controller, build_parts
 from repro.config import param, validate
 from repro.errors import ConfigError
 from repro.geometry import Rx, Rz, make_T, rot_y, trans
 from repro.sensors.camera import project_points
 from repro.sensors.tactile import TactileSensor, bh8_pads, mount_pads
 from repro.sim import barrett as B
-from repro.sim.episode import Episode, Observation, StepResult, run_episode
+from repro.sim.episode import Episode, Observation, StepResult, View, run_episode
 from repro.sim.pa10 import PALM_HEIGHT
 from repro.sim.robot import JointGroup
 from repro.sim.scene import Part, Scene, pose_json
@@ -112,6 +112,10 @@ def task_layout() -> sc.Layout:
 TASK_LAYOUT = task_layout()
 #: Desaturated cylinder for the camera's world (experiment 3's orange is a dot hue). ours.
 TASK_CYLINDER_RGBA = (0.66, 0.62, 0.56, 1.0)
+#: The snapshots' view. ours: the hand, the cylinder and the part from the robot's right
+#: front, the hand's start 0.25 m above the goal in the frame.
+TASK_VIEW = View(target=(0.55, 0.20, 0.36), distance=1.0, yaw=60.0, pitch=-20.0, width=320,
+                 height=240, fov=45.0)
 #: Column ``task_phase``.
 TASK_PHASES = {
     "approach": "Table 1, approaching: RVC (PA-10), direct hybrid controller (mini-robot), "
@@ -291,7 +295,7 @@ def build(config: TaskConfig, out_dir: Path) -> tuple[Episode, TaskController]:
         f"{k}: {v}" for k, v in TASK_PHASES.items()))
     ep = Episode(scene, parts.drives, ctrl, cols, config.duration, cameras=[parts.rig],
                  sensors=[tactile, e3.FingerTorqueSensor(chain), audit], movers=movers,
-                 video=config.video, video_every=33, view=VIEW,
+                 video=config.video, video_every=33, view=TASK_VIEW,
                  snapshot_period=config.snapshot_period, log_every=config.log_every)
     return ep, ctrl
 

@@ -8,6 +8,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 
+import imageio.v2 as imageio  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
@@ -99,13 +100,49 @@ def phases(run: RunFiles) -> plt.Figure:
     return fig
 
 
+def frames(run: RunFiles, run_dir: Path) -> plt.Figure | None:
+    """Eight rendered snapshots of the whole task, the nearest to: the start, a third and two
+    thirds of the approach, the arm's stop, the fingers' first contact, the support lowered,
+    the middle of the trajectory and the end of the hand's task."""
+    files = sorted((run_dir / "frames").glob("scene_*.png"))
+    if not files:
+        return None
+    dt = float(run.scene["world"]["control_dt"])
+    steps = np.array([int(f.stem.split("_")[1]) for f in files])
+    df = run.trace
+    t = df["t"].to_numpy(float)
+    first: dict[str, float] = {}
+    for k, ph in enumerate(df["phase"].fillna("").astype(str).to_numpy()):
+        first.setdefault(ph, float(t[k]))
+    t_m = first.get("preshape", float(t[-1]))
+    t_s, t_traj = first.get("support", t_m), first.get("manipulation", t_m)
+    t_end = first.get("stopped", first.get("done", float(t[-1])))
+    wanted = [(0.0, "start"), (t_m / 3, "approach"), (2 * t_m / 3, "approach"),
+              (t_m, "s_u* reached"), (t_s, "grasp closed"), (t_traj, "support lowered"),
+              (0.5 * (t_traj + t_end), "trajectory"), (t_end, "end of the hand's task")]
+    fig, axes = plt.subplots(2, 4, figsize=(7.0, 3.1))
+    for i, (ax, (tw, label)) in enumerate(zip(np.ravel(axes), wanted, strict=True)):
+        j = int(np.argmin(np.abs(steps * dt - tw)))
+        ax.imshow(imageio.imread(files[j]))
+        ax.set_title(f"{i + 1}: t = {steps[j] * dt:.1f} s\n{label}", fontsize=6.5)
+        ax.axis("off")
+    fig.suptitle("Whole task (Table 1): approach, then manipulation (snapshots every "
+                 f"{float(run.manifest['config'].get('snapshot_period', 0.0)):g} s)", fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
 def make_task_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
-    """The whole-task figure, if its run exists under ``results_dir / pomares2011``."""
+    """The whole-task figures, if its run exists under ``results_dir / pomares2011``."""
     apply_style()
+    run_dir = Path(results_dir) / PAPER / "task"
     run = load_run_if_present(Path(results_dir) / PAPER, "task")
     if run is None:
         return []
-    fig = phases(run)
-    out = save_figure(fig, figures_dir, PAPER, "task_phases")
-    plt.close(fig)
+    out: list[Path] = []
+    for fig, name in ((phases(run), "task_phases"), (frames(run, run_dir), "task_frames")):
+        if fig is None:
+            continue
+        out += save_figure(fig, figures_dir, PAPER, name)
+        plt.close(fig)
     return out
