@@ -271,9 +271,10 @@ def build(config: TaskConfig, out_dir: Path) -> tuple[Episode, TaskController]:
         "phases": TASK_PHASES,
         "cylinder": {"pose": pose_json(cylinder_pose(config)), "radius_m": config.cylinder_radius,
                      "length_m": config.cylinder_length, "mass_kg": config.cylinder_mass,
-                     "placement": "in the hand frame at the PA-10's goal T_WORLD_FLANGE_GOAL: "
+                     "placement": "in the hand frame at the task's goal (layout.goal_flange): "
                      "axis along the hand's x, centre on the hand axis palm_gap under the palm",
-                     "dynamics": "as experiment 3 (scene extra exp3 fields in the config)"},
+                     "dynamics": "as experiment 3: friction, rolling and spinning friction, "
+                     "contact stiffness and damping are the config's fields"},
         "support": {"size_m": list(support_size(config)), "lowered_by_m": config.support_drop_m,
                     "speed_m_s": config.support_speed_m_s, "starts": "support_delay_s after "
                     "every finger stopped closing (pose columns support_*); it sinks into the "
