@@ -120,7 +120,7 @@ def frames(run: RunFiles, run_dir: Path) -> plt.Figure | None:
     wanted = [(0.0, "start"), (t_m / 3, "approach"), (2 * t_m / 3, "approach"),
               (t_m, "s_u* reached"), (t_s, "grasp closed"), (t_traj, "support lowered"),
               (0.5 * (t_traj + t_end), "trajectory"), (t_end, "end of the hand's task")]
-    fig, axes = plt.subplots(2, 4, figsize=(7.0, 3.1))
+    fig, axes = plt.subplots(2, 4, figsize=(7.0, 3.6))
     for i, (ax, (tw, label)) in enumerate(zip(np.ravel(axes), wanted, strict=True)):
         j = int(np.argmin(np.abs(steps * dt - tw)))
         ax.imshow(imageio.imread(files[j]))
