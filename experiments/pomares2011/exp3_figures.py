@@ -66,14 +66,33 @@ def _end_marker(ax: plt.Axes, run: RunFiles) -> None:
             ax.axvline(float(hit["t"].iloc[0]), color="k", ls=ls, lw=0.8, label=label)
 
 
-def fig11(run: RunFiles, run_dir: Path) -> plt.Figure | None:
-    """Fig. 11: eight rendered frames, 1-4 the automatic closing and the support going away,
-    5-8 the manipulation (start, 1/3, 2/3, end), the nearest snapshots to those instants."""
+def snapshot_montage(run: RunFiles, run_dir: Path, wanted: list[tuple[float, str]], title: str,
+                     figsize: tuple[float, float] = (7.0, 3.1), crop: float = 0.0
+                     ) -> plt.Figure | None:
+    """Eight rendered snapshots of ``run_dir/frames`` in a 2 x 4 grid: for each ``(t [s],
+    label)`` of ``wanted`` the snapshot nearest to ``t``, its left and right ``crop`` fraction
+    cut off. None without snapshots."""
     files = sorted((run_dir / "frames").glob("scene_*.png"))
     if not files:
         return None
     dt = float(run.scene["world"]["control_dt"])
     steps = np.array([int(f.stem.split("_")[1]) for f in files])
+    fig, axes = plt.subplots(2, 4, figsize=figsize)
+    for i, (ax, (tw, label)) in enumerate(zip(np.ravel(axes), wanted, strict=True)):
+        j = int(np.argmin(np.abs(steps * dt - tw)))
+        img = imageio.imread(files[j])
+        w = img.shape[1]
+        ax.imshow(img[:, int(crop * w):int((1.0 - crop) * w)])
+        ax.set_title(f"{i + 1}: t = {steps[j] * dt:.1f} s\n{label}", fontsize=6.5)
+        ax.axis("off")
+    fig.suptitle(title, fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def fig11(run: RunFiles, run_dir: Path) -> plt.Figure | None:
+    """Fig. 11: eight rendered frames, 1-4 the automatic closing and the support going away,
+    5-8 the manipulation (start, 1/3, 2/3, end), the nearest snapshots to those instants."""
     df = run.trace
     ph = _phase_times(df)
     cfg = run.manifest.get("config", {})
@@ -87,18 +106,9 @@ def fig11(run: RunFiles, run_dir: Path) -> plt.Figure | None:
               (t_m + (t_end - t_m) / 3, "manipulation"), (t_m + 2 * (t_end - t_m) / 3,
                                                           "manipulation"),
               (t_end, "stop" if "stopped" in ph else "trajectory done")]
-    fig, axes = plt.subplots(2, 4, figsize=(7.0, 3.1))
-    for i, (ax, (tw, label)) in enumerate(zip(np.ravel(axes), wanted, strict=True)):
-        j = int(np.argmin(np.abs(steps * dt - tw)))
-        img = imageio.imread(files[j])
-        h, w = img.shape[:2]
-        ax.imshow(img[:, int(0.12 * w):int(0.88 * w)])
-        ax.set_title(f"{i + 1}: t = {steps[j] * dt:.1f} s\n{label}", fontsize=6.5)
-        ax.axis("off")
-    fig.suptitle("Exp. 3 (cf. Fig. 11): finger 3 left, fingers 1-2 right; the cylinder is "
-                 "moved towards fingers 1-2", fontsize=8)
-    fig.tight_layout()
-    return fig
+    return snapshot_montage(run, run_dir, wanted, "Exp. 3 (cf. Fig. 11): finger 3 left, "
+                            "fingers 1-2 right; the cylinder is moved towards fingers 1-2",
+                            crop=0.12)
 
 
 def fig12(run: RunFiles) -> plt.Figure:

@@ -8,12 +8,15 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import imageio.v2 as imageio  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from experiments.pomares2011.exp3_figures import FINGERS, _readjust_times  # noqa: E402
+from experiments.pomares2011.exp3_figures import (  # noqa: E402
+    FINGERS,
+    _readjust_times,
+    snapshot_montage,
+)
 from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
 from repro.runs.trace import RunFiles, load_run_if_present  # noqa: E402
 
@@ -104,11 +107,6 @@ def frames(run: RunFiles, run_dir: Path) -> plt.Figure | None:
     """Eight rendered snapshots of the whole task, the nearest to: the start, a third and two
     thirds of the approach, the arm's stop, the fingers' first contact, the support lowered,
     the middle of the trajectory and the end of the hand's task."""
-    files = sorted((run_dir / "frames").glob("scene_*.png"))
-    if not files:
-        return None
-    dt = float(run.scene["world"]["control_dt"])
-    steps = np.array([int(f.stem.split("_")[1]) for f in files])
     df = run.trace
     t = df["t"].to_numpy(float)
     first: dict[str, float] = {}
@@ -120,16 +118,9 @@ def frames(run: RunFiles, run_dir: Path) -> plt.Figure | None:
     wanted = [(0.0, "start"), (t_m / 3, "approach"), (2 * t_m / 3, "approach"),
               (t_m, "s_u* reached"), (t_s, "grasp closed"), (t_traj, "support lowered"),
               (0.5 * (t_traj + t_end), "trajectory"), (t_end, "end of the hand's task")]
-    fig, axes = plt.subplots(2, 4, figsize=(7.0, 3.6))
-    for i, (ax, (tw, label)) in enumerate(zip(np.ravel(axes), wanted, strict=True)):
-        j = int(np.argmin(np.abs(steps * dt - tw)))
-        ax.imshow(imageio.imread(files[j]))
-        ax.set_title(f"{i + 1}: t = {steps[j] * dt:.1f} s\n{label}", fontsize=6.5)
-        ax.axis("off")
-    fig.suptitle("Whole task (Table 1): approach, then manipulation (snapshots every "
-                 f"{float(run.manifest['config'].get('snapshot_period', 0.0)):g} s)", fontsize=8)
-    fig.tight_layout()
-    return fig
+    period = float(run.manifest["config"].get("snapshot_period", 0.0))
+    return snapshot_montage(run, run_dir, wanted, "Whole task (Table 1): approach, then "
+                            f"manipulation (snapshots every {period:g} s)", figsize=(7.0, 3.6))
 
 
 def make_task_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
