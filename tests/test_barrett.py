@@ -352,6 +352,18 @@ def test_motor_counts_round_trip() -> None:
     assert (q_p, q_d) == pytest.approx((0.5, 0.5), abs=1e-12)
 
 
+def test_hand_joints_from_motors_places_each_finger_engaged() -> None:
+    """Each finger's motor angle sets only its own proximal (m / 125) and distal (m / 375)
+    joints; the spread joints take the spread."""
+    m = (100.0, 150.0, 200.0)
+    q = dict(zip(JOINTS, B.hand_joints_from_motors(m, spread=0.3), strict=True))
+    for k, mk in zip((1, 2, 3), m, strict=True):
+        assert q[f"bh8_finger{k}_proximal_joint"] == pytest.approx(mk / 125.0, abs=1e-15)
+        assert q[f"bh8_finger{k}_distal_joint"] == pytest.approx(mk / 375.0, abs=1e-15)
+    assert q["bh8_finger1_spread"] == q["bh8_finger2_spread"] == 0.3
+    assert B.hand_joints_from_motors((0.0, 0.0, 0.0)).tolist() == [0.0] * 8
+
+
 def test_torque_switch_state_machine() -> None:
     """Engaged: (m/125, m/375); breakaway only while closing past the threshold; then the
     proximal holds and the distal follows m / 93.75 - q_b; reopening re-engages at the

@@ -59,12 +59,7 @@ N_JOINTS = 17
 
 def _hand(proximal_deg: float) -> np.ndarray:
     """(8,) hand joints: spread 0, every finger's motor at 125 x ``proximal_deg`` (engaged)."""
-    q = np.zeros(len(HAND_JOINTS))
-    for k in (1, 2, 3):
-        q_p, q_d = B.finger_joints_from_motor(B.J2_RATIO * np.deg2rad(proximal_deg))
-        q[HAND_JOINTS.index(f"bh8_finger{k}_proximal_joint")] = q_p
-        q[HAND_JOINTS.index(f"bh8_finger{k}_distal_joint")] = q_d
-    return q
+    return B.hand_joints_from_motors((B.J2_RATIO * np.deg2rad(proximal_deg),) * 3)
 
 
 #: The hand half open (the approach pose of pomares2011 experiments 1-2).

@@ -81,6 +81,26 @@ def test_collect_ours(tmp_path: Path) -> None:
     ]
 
 
+def test_collect_ours_reads_documentation_comments(tmp_path: Path) -> None:
+    """A ``#:`` comment saying ``ours: <why>`` marks the next code line; its why runs on over
+    the next ``#:`` lines; a ``#:`` comment without ``ours:`` (or with the word in another
+    sense) is no mark, and a ``# ours:`` line right after a doc comment is its own row."""
+    (tmp_path / "m.py").write_text(
+        "#: Stand height [m]. ours: the camera then sees the part\n"
+        "#: from 0.15 m.\n"
+        "STAND = 0.20\n"
+        "#: Paper value (Sec. 7), not ours, and the hours: fine.\n"
+        "FPS = 200\n"
+        "#: Gap (ours: a few mm)\n"
+        "GAP = 0.005  # ours: the approach stops short\n")
+    rows = [(r.line, r.code, r.why) for r in collect_ours([tmp_path]).itertuples(index=False)]
+    assert rows == [
+        (1, "STAND = 0.20", "the camera then sees the part from 0.15 m."),
+        (6, "GAP = 0.005  # ours: the approach stops short", "a few mm)"),
+        (7, "GAP = 0.005", "the approach stops short"),
+    ]
+
+
 def test_markdown_table_escapes() -> None:
     table = markdown_table(("a", "b"), [("x|y", "1\n2"), (None, 3)])
     assert table.splitlines() == ["| a | b |", "|---|---|", "| x\\|y | 1<br>2 |", "|  | 3 |"]

@@ -24,21 +24,23 @@ REACHED_PX = 2.0
 #: "stays there": after reaching s*, the RMS error never exceeds this while the PA-10 moves
 #: [px]. ours: the reached threshold plus 1 px of margin for the held 200 fps frames.
 STAY_PX = 3.0
-#: "RVC features reach s_u*": final RMS error under this [px] (ours, as REACHED_PX).
+#: "RVC features reach s_u*": final RMS error under this [px]. ours: as REACHED_PX.
 REACHED_U_PX = 2.0
-#: "the base is still": every PA-10 joint's measured speed under this [rad/s]. ours.
+#: "the base is still": every PA-10 joint's measured speed under this [rad/s]. ours: 3e-4 of
+#: the RVC's peak joint speed (0.3 rad/s).
 BASE_STILL_RAD_S = 1e-4
 #: "V non-increasing": no rise between two trace rows larger than this fraction of V at
 #: the start of the still window. ours: the features are held between 200 fps frames and a
 #: new frame moves them by the detection noise, a step in the image potential.
 V_RISE_REL = 1e-3
-#: The still window must last at least this long to judge claim 2 [s]. ours.
+#: The still window must last at least this long to judge claim 2 [s]. ours: 100 trace rows.
 MIN_WINDOW_S = 1.0
 #: "e_v -> 0": the VVS reprojection residual at the end under this [px] and the position
 #: error under POSE_TOL_M. ours: ~the detection error; 2 mm at 0.2-0.4 m depth.
 VVS_RESIDUAL_PX = 0.5
 POSE_TOL_M = 2e-3
-#: "f1y stays at 272 px" while the human is within dmin: |f1y - 272| under this [px]. ours.
+#: "f1y stays at 272 px" while the human is within dmin: |f1y - 272| under this [px]. ours:
+#: as REACHED_PX.
 F1Y_TOL_PX = 2.0
 #: "e2 moves the mini-robot away": the minimum true distance to the human is at least this
 #: much larger than without the secondary task [m]. ours: 1 cm, far above the distance

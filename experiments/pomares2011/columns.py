@@ -4,33 +4,15 @@ The runner adds its own: ``pa10_q{i}``/``pa10_qd{i}``/``pa10_u{i}`` (the PA-10: 
 velocity commands [rad/s]), ``mini_q{i}``/``mini_qd{i}``/``mini_u{i}`` (the mini-robot:
 joint torques [N m]), ``motor_q{i}``/``motor_qd{i}``/``motor_u{i}`` (the hand's three finger
 motors: motor angle targets [rad]), ``bh8_q{i}``/``bh8_qd{i}`` (the hand's joints, observed),
-the camera's points ``s{i}_*`` with their audit,
-``*_dist_*``.
+the camera's points ``s{i}_*`` with their audit, ``*_dist_*``.
 """
 
 from __future__ import annotations
 
-import numpy as np
-
 from repro.runs.columns import Columns
-from repro.sim.barrett import BH8_JOINTS
 
 N_POINTS = 4  # pomares2011 Sec. 7: four points
-__all__ = ["N_POINTS", "declare_columns", "declare_hand_joint_columns", "hand_joint_values"]
-
-
-def declare_hand_joint_columns(cols: Columns) -> Columns:
-    """``hand_q{i}``: the measured angle of each of the hand's eight joints (the q columns of
-    the joint group ``hand`` in scene.json; the runner logs the finger motors)."""
-    for i, j in enumerate(BH8_JOINTS, start=1):
-        cols.add(f"hand_q{i}", "rad", f"measured angle of hand joint {i} ({j}; PyBullet joint "
-                 "state)")
-    return cols
-
-
-def hand_joint_values(q_hand: np.ndarray) -> dict[str, float]:
-    """The ``hand_q{i}`` values of the hand's joint angles ``q_hand`` (8,) [rad]."""
-    return {f"hand_q{i}": float(v) for i, v in enumerate(q_hand, start=1)}
+__all__ = ["N_POINTS", "declare_columns"]
 
 
 def declare_columns(human: bool = False) -> Columns:

@@ -50,7 +50,6 @@ from typing import Any, NamedTuple
 import numpy as np
 import pybullet as p
 
-from experiments.pomares2011.columns import declare_hand_joint_columns, hand_joint_values
 from repro.config import param, validate
 from repro.control.tactile_control import (
     LOG_FIELDS,
@@ -99,10 +98,12 @@ SUPPORT_RGBA = (0.55, 0.55, 0.60, 1.0)
 #: by the rounded tips, measured).
 SUPPORT_SIZE = (0.10, 0.010, 0.020)
 #: A finger's clutch counts as broken away when its distal is this far past 1/3 of its
-#: proximal [rad] (engaged, the gear constraint holds the ratio to ~5e-5 rad). ours.
+#: proximal [rad]. ours: 0.5 deg, far above the ~5e-5 rad to which the gear constraint holds
+#: the ratio while engaged.
 BREAKAWAY_DETECT_RAD = math.radians(0.5)
 #: The cylinder counts as dropped once no finger and no palm touches it and its centre is
-#: this far from its pose at the start of the manipulation [m]. ours.
+#: this far from its pose at the start of the manipulation [m]. ours: 5 mm, twice the largest
+#: displacement of a held cylinder in the runs (2.35 mm).
 DROP_M = 5.0e-3
 
 
@@ -454,6 +455,20 @@ class GraspAudit:
 
 
 # ============================================================================ columns
+def declare_hand_joint_columns(cols: Columns) -> Columns:
+    """``hand_q{i}``: the measured angle of each of the standalone hand's eight joints (its
+    q columns in scene.json; the runner logs the finger motors)."""
+    for i, j in enumerate(B.BH8_JOINTS, start=1):
+        cols.add(f"hand_q{i}", "rad", f"measured angle of hand joint {i} ({j}; PyBullet joint "
+                 "state)")
+    return cols
+
+
+def hand_joint_values(q_hand: np.ndarray) -> dict[str, float]:
+    """The ``hand_q{i}`` values of the hand's joint angles ``q_hand`` (8,) [rad]."""
+    return {f"hand_q{i}": float(v) for i, v in enumerate(q_hand, start=1)}
+
+
 #: Phases of the controller (column ``phase``).
 PHASES = {
     "waiting": "the whole task only: the approach is on, the finger motors hold (Table 1)",
@@ -817,12 +832,7 @@ def build(config: Exp3Config, out_dir: Path) -> tuple[Episode, Exp3Controller]:
     hand = scene.add_urdf("hand", B.bh8_urdf_path(), B.BH8_JOINTS, B.BH8_LIMITS, T_WORLD_HAND,
                           column_prefix="hand_")
     c = hand.client
-    q0 = np.zeros(len(B.BH8_JOINTS))
-    for k, m in zip(FINGERS, preshape, strict=True):
-        q_p, q_d = B.finger_joints_from_motor(float(m))
-        q0[B.BH8_JOINTS.index(f"bh8_finger{k}_proximal_joint")] = q_p
-        q0[B.BH8_JOINTS.index(f"bh8_finger{k}_distal_joint")] = q_d
-    hand.reset(q0)
+    hand.reset(B.hand_joints_from_motors(preshape))
     couplings = B.add_coupling_constraints(hand.body, c)
     for link in range(-1, p.getNumJoints(hand.body, physicsClientId=c)):
         # friction 1 on the hand: the pair's friction (PyBullet multiplies the two) is the

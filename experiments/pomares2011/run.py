@@ -169,15 +169,13 @@ class Pomares2011Controller:
 
     def __init__(self, config: Pomares2011Config, chain: Robot, arm: JointGroup,
                  mini: JointGroup, human: _Bones | None = None,
-                 s_u_star: np.ndarray | None = None,
-                 hand_hold: np.ndarray | None = None, layout: sc.Layout = sc.LAYOUT) -> None:
+                 s_u_star: np.ndarray | None = None, layout: sc.Layout = sc.LAYOUT) -> None:
         self.config, self.chain, self.arm, self.mini = config, chain, arm, mini
         #: the goal, the desired features s* and the RVC's points P_u (experiments 1-2: the
         #: paper's; the whole task: its own, scene.Layout)
         self.layout = layout
         self.s_star = np.asarray(layout.s_star, dtype=float)
-        self.hand_hold = np.full(3, sc.HAND_APPROACH_MOTOR) if hand_hold is None else (
-            np.asarray(hand_hold, dtype=float))
+        self.hand_hold = np.full(3, sc.HAND_APPROACH_MOTOR)  # the finger motors' targets
         #: the RVC's desired features [px]: the learning stage's (default: the paper's)
         self.s_u_star = np.asarray(layout.s_u_star if s_u_star is None else s_u_star, float)
         self.human = human

@@ -55,7 +55,6 @@ from repro.sim.human import HumanBody, HumanInScene, HumanMotion, HumanPath
 from repro.sim.pa10 import (
     ALL_JOINTS,
     ALL_LIMITS,
-    HAND_JOINTS,
     MINI_CAPSULES,
     PALM_HEIGHT,
     pa10_urdf_path,
@@ -136,7 +135,8 @@ DOT_PROUD = 0.0003
 #: fingertips (0.18 m out) 14 cm above the top face.
 GOAL_STANDOFF = 0.32
 #: The PA-10 goal: the hand axis (flange +z) straight down through the top-face centre,
-#: flange x along the world x (the fingers close across the part's y edges). ours.
+#: flange x along the world x (the fingers close across the part's y edges). ours: a top
+#: grasp.
 T_WORLD_FLANGE_GOAL = (OBJECT.T_world @ trans(0.0, 0.0, OBJECT.top_z + GOAL_STANDOFF)
                        @ Rx(np.pi))
 #: The PA-10 start of experiment 1: 0.30 m higher, 0.10 m back towards the robot and 0.15 m
@@ -153,22 +153,8 @@ HAND_APPROACH_PROXIMAL_DEG = 60.0
 HAND_APPROACH_MOTOR = B.J2_RATIO * HAND_APPROACH_PROXIMAL_DEG * DEG
 
 
-def hand_pose(motor: tuple[float, float, float] | np.ndarray, spread: float = 0.0
-              ) -> np.ndarray:
-    """(8,) hand joint angles, :data:`repro.sim.barrett.BH8_JOINTS` order [rad], of the three
-    finger motors at ``motor`` [rad] with the clutch engaged, and ``spread`` [rad]."""
-    q = np.zeros(len(HAND_JOINTS))
-    for k, m in zip(B.FINGERS, motor, strict=True):
-        q_p, q_d = B.finger_joints_from_motor(float(m))
-        q[HAND_JOINTS.index(f"bh8_finger{k}_proximal_joint")] = q_p
-        q[HAND_JOINTS.index(f"bh8_finger{k}_distal_joint")] = q_d
-    for j in B.BH8_SPREAD_JOINTS:
-        q[HAND_JOINTS.index(j)] = spread
-    return q
-
-
 #: The hand's joints during the approach [rad] (HAND_JOINTS order).
-Q_HAND = hand_pose((HAND_APPROACH_MOTOR,) * 3)
+Q_HAND = B.hand_joints_from_motors((HAND_APPROACH_MOTOR,) * 3)
 #: Seed of solve_ik for the goal (elbow up, wrist bent down); the start is solved from the goal.
 IK_SEED_GOAL = np.r_[0.0, -0.6, -1.6, 0.0, -0.9, 0.0, 0.0, 0.0, 0.0, Q_HAND]
 

@@ -68,11 +68,13 @@ STAND_HEIGHT = 0.20
 #: Where the cylinder's centre is over the table (world x, y) [m]. ours: 0.35 m to the side
 #: of the part, within the table (|y| < 0.5 m).
 CYLINDER_XY = (0.55, 0.35)
-#: The mini-robot at the goal and at the start [deg] (ours, see the module docstring); q3 puts
+#: The mini-robot at the goal and at the start [deg]. ours: see the module docstring; q3 puts
 #: the part's top-face centre at v = 265 px (goal) and 230 px (start).
 MINI_GOAL_DEG = (90.0, -30.0, -17.6)
 MINI_START_DEG = (80.0, -30.0, 7.25)
 #: The start: this far above the goal along the world z [m], turned about the hand axis [deg].
+#: ours: the approach comes down the hand axis; a 15 deg turn brought finger 1 within 2.2 mm
+#: of the cylinder half-way down (trial), 5 deg leaves it ~9 mm.
 START_RISE, START_TURN_DEG = 0.25, 5.0
 
 
@@ -110,7 +112,8 @@ def task_layout() -> sc.Layout:
 
 #: The whole task's start, goal and desired features.
 TASK_LAYOUT = task_layout()
-#: Desaturated cylinder for the camera's world (experiment 3's orange is a dot hue). ours.
+#: The cylinder's colour. ours: desaturated (HSV saturation 39/255), experiment 3's orange
+#: is a dot hue.
 TASK_CYLINDER_RGBA = (0.66, 0.62, 0.56, 1.0)
 #: The snapshots' view. ours: the hand, the cylinder and the part from the robot's right
 #: front, the hand's start 0.25 m above the goal in the frame.

@@ -38,6 +38,9 @@ BENCH_COLUMNS = ("benchmark", "median_s", "p95_s", "n", "machine")
 OURS_HEADING = "Values chosen by us (the papers are silent)"
 
 _OURS = re.compile(r"#\s*ours:\s*(?P<why>.*)$", re.IGNORECASE)
+#: A documentation comment (``#: ...``, the one Sphinx reads for the value below it) whose
+#: text says ``ours: <why>``; the why runs on over the following ``#:`` lines.
+_OURS_DOC = re.compile(r"#:(?:.*?[\s(])?ours:\s*(?P<why>.*)$", re.IGNORECASE)
 _SKIP_DIRS = {".venv", "venv", "__pycache__", ".git", "build", ".mypy_cache", ".ruff_cache"}
 _MISSING = "—"
 
@@ -109,7 +112,9 @@ def collect_ours(paths: Sequence[Path]) -> pd.DataFrame:
     """Every ``# ours: <why>`` comment in the given files (directories: their *.py files).
 
     A ``# ours:`` comment marks a value the paper does not give. For a comment after code, the
-    code is that line's code; for a comment on its own line, the next code line.
+    code is that line's code; for a comment on its own line, the next code line. A
+    documentation comment ``#: <what> ours: <why>`` counts too: its why runs on over the
+    ``#:`` lines that follow it, and its code is the next code line.
 
     Returns:
         Columns OURS_COLUMNS: file (path as given, posix), line (1-based, of the comment),
@@ -121,8 +126,19 @@ def collect_ours(paths: Sequence[Path]) -> pd.DataFrame:
         lines = text.splitlines()
         for number, column, comment in _comment_lines(text, path.suffix == ".py"):
             match = _OURS.match(comment.strip())
-            if not match:
+            doc = None if match else _OURS_DOC.match(comment.strip())
+            if not (match or doc):
                 continue
+            if doc is not None:
+                match = doc
+            assert match is not None
+            why = match.group("why").strip()
+            if doc is not None:  # the why runs on over the doc comment's next lines
+                for following in lines[number:]:
+                    stripped = following.strip()
+                    if not stripped.startswith("#:"):
+                        break
+                    why = f"{why} {stripped[2:].strip()}".strip()
             code = lines[number - 1][:column].strip() if number <= len(lines) else ""
             if not code:
                 for following in lines[number:]:
@@ -130,7 +146,7 @@ def collect_ours(paths: Sequence[Path]) -> pd.DataFrame:
                     if stripped and not stripped.startswith("#"):
                         code = stripped
                         break
-            rows.append((path.as_posix(), number, code, match.group("why").strip()))
+            rows.append((path.as_posix(), number, code, why))
     df = pd.DataFrame(rows, columns=list(OURS_COLUMNS))
     return df.astype({"line": "int64"})
 

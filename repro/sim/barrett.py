@@ -69,8 +69,8 @@ __all__ = [
     "FingerMotors", "FingerTargets", "HandCouplings", "TorqueSwitch", "add_coupling_constraints",
     "bh8_dh_frames", "bh8_joint_indices", "bh8_urdf_path", "counts_to_motor_angle",
     "finger_counts", "finger_joints_from_counts", "finger_joints_from_motor",
-    "finger_motor_angle", "motor_angle_to_counts", "set_gear_engaged", "set_spread",
-    "spread_counts", "spread_from_counts",
+    "finger_motor_angle", "hand_joints_from_motors", "motor_angle_to_counts",
+    "set_gear_engaged", "set_spread", "spread_counts", "spread_from_counts",
 ]
 
 FINGERS = (1, 2, 3)
@@ -324,6 +324,20 @@ def finger_joints_from_motor(motor_angle: float,
     if q_breakaway is None or m <= J2_RATIO * q_breakaway:
         return m / J2_RATIO, m / J3_RATIO
     return float(q_breakaway), m / DISTAL_RATIO - float(q_breakaway)
+
+
+def hand_joints_from_motors(motors: tuple[float, float, float] | np.ndarray,
+                            spread: float = 0.0) -> np.ndarray:
+    """(8,) joint angles of the hand, :data:`BH8_JOINTS` order [rad], with the three finger
+    motors at ``motors`` [rad] and the clutches engaged (:func:`finger_joints_from_motor`),
+    both spread joints at ``spread`` [rad]."""
+    q = np.zeros(len(BH8_JOINTS))
+    for k, m in zip(FINGERS, motors, strict=True):
+        q[BH8_JOINTS.index(f"bh8_finger{k}_proximal_joint")], q[BH8_JOINTS.index(
+            f"bh8_finger{k}_distal_joint")] = finger_joints_from_motor(float(m))
+    for j in BH8_SPREAD_JOINTS:
+        q[BH8_JOINTS.index(j)] = spread
+    return q
 
 
 def finger_motor_angle(q_proximal: float, q_distal: float) -> float:

@@ -61,7 +61,6 @@ class Joint:
 WHITE = (0.85, 0.85, 0.82, 1.0)
 BLUE = (0.15, 0.3, 0.6, 1.0)
 DARK = (0.25, 0.25, 0.28, 1.0)
-SILVER = (0.7, 0.7, 0.72, 1.0)
 ORANGE = (0.9, 0.5, 0.1, 1.0)
 BLACK = (0.08, 0.08, 0.08, 1.0)
 
@@ -139,9 +138,6 @@ BODIES = PA10_BODIES + _mini_bodies()
 FRAMES = ("pa10_flange", "mini_camera_optical")
 #: The fixed joint that mounts the hand's root ``bh8_base`` on the flange (identity).
 HAND_MOUNT_JOINT = "bh8_mount_joint"
-
-_I3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-
 
 def _tup(a: np.ndarray) -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(float(v) for v in row) for row in np.asarray(a))
