@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 import pinocchio as pin
 import pytest
+from references import REFERENCES, _drop_timing, assert_matches_reference
 
 from experiments.chan2011 import EXPERIMENTS
 from experiments.chan2011 import claims as cl
@@ -34,32 +35,35 @@ SHORT = {"simulation": 0.3, "simulation_render": 0.3, "experiment": 2.0, "ibvs":
 TIMING_COLUMNS = ("solve_s", "ctrl_s", "camera_render_s")
 
 
-def short_config(name: str) -> object:
+def short_config(name: str, **kw: object) -> object:
     exp = next(e for e in EXPERIMENTS.experiments if e.name == name)
     if name == "dcc_audit":
-        return DCCAuditConfig(n_segments=12)
+        return dataclasses.replace(DCCAuditConfig(n_segments=12), **kw)
     return dataclasses.replace(exp.config_cls(), duration=SHORT[name], camera_mode="exact",
-                               snapshot_period=0.0)
+                               snapshot_period=0.0, **kw)
 
 
-def short_run(name: str, out: Path) -> RunFiles:
+def short_run(name: str, out: Path, **kw: object) -> RunFiles:
     exp = next(e for e in EXPERIMENTS.experiments if e.name == name)
-    return load_run(exp.run(short_config(name), out))
+    return load_run(exp.run(short_config(name, **kw), out))
 
 
 @pytest.mark.parametrize("name", [e.name for e in EXPERIMENTS.experiments])
 def test_short_run_matches_reference(name: str, tmp_path: Path) -> None:
+    """Every column of the short run within its measured tolerance
+    (``tests/reference/chan2011/<name>.tol.json``, ``tests/measure_tolerances.py``).
+
+    Measured 2026-12-02 on an AMD EPYC (x86-64, AVX-512) over 6 OpenBLAS kernel families
+    and the initial joints moved by +-1e-12 rad: nothing moves beyond the reference's own
+    10-digit rounding except the joints by <= 4.8e-10 rad (the kinematic inner loop and the
+    NMPC contract a perturbation: CasADi and qpOASES do not call numpy's BLAS); tolerance
+    10x that. The experiment's ``max_violation`` (a 1e-10 m constraint residual) is chaotic
+    from row 3 and compared by windowed mean/RMS. A 1 % change of W (or of the IBVS gain),
+    the command one step late, or (IBVS) a flipped Jacobian row fail it by >= 1e6x
+    (tests/test_reference_tolerances.py)."""
     got = short_run(name, tmp_path / name)
     assert got.manifest["status"] == "completed"
-    ref = pd.read_csv(REF_DIR / f"{name}.csv")
-    df = got.trace
-    assert len(df) == len(ref)
-    compared = [c for c in ref.columns if ref[c].dtype.kind == "f" and c not in TIMING_COLUMNS]
-    assert len(compared) >= 10
-    for c in compared:
-        tol = 1e-3 if c.startswith("p") or c.startswith("e_") else 1e-5
-        np.testing.assert_allclose(df[c].to_numpy(float), ref[c].to_numpy(float), atol=tol,
-                                   rtol=1e-6, err_msg=f"{name}: column {c}")
+    assert_matches_reference(REFERENCES[f"chan2011/{name}"], _drop_timing(got.trace))
 
 
 def test_nmpc_commands_respect_every_bound(tmp_path: Path) -> None:

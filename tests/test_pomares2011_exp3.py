@@ -5,20 +5,21 @@ clause), and configs refused before anything is written.
 
 The hand, the pads and Algorithm 1 have their own tests (test_barrett.py, test_tactile.py,
 test_tactile_control.py). Regenerate the reference after an intended behaviour change:
-``.venv/bin/python tests/test_pomares2011_exp3.py --write-reference``.
+``.venv/bin/python tests/make_reference.py --only pomares2011/exp3`` (then remeasure its
+tolerances, ``tests/measure_tolerances.py``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 import pytest
+from references import REFERENCES, assert_matches_reference
 
 from experiments.pomares2011.exp3 import (
     PRESSURE_IMAGES,
@@ -31,10 +32,7 @@ from experiments.pomares2011.exp3_claims import CLAIM_5, FLAT_FRACTION, SLIP_M, 
 from repro.errors import ConfigError
 from repro.runs.trace import EVENTS_COLUMNS, RunFiles, load_run
 
-REF = Path(__file__).parent / "reference" / "pomares2011" / "exp3.csv"
 TIMING = ("ctrl_s",)
-#: Pressures are quantised to 0.7 kPa: one step of tolerance (a rounding flip).
-PRESSURE_TOL_KPA = 0.7 + 1e-9
 
 
 def short_config(**kw: Any) -> Exp3Config:
@@ -49,8 +47,8 @@ def short_config(**kw: Any) -> Exp3Config:
     return dataclasses.replace(Exp3Config(), **fields)
 
 
-def make_reference(tmp: Path) -> pd.DataFrame:
-    df = load_run(run(short_config(), tmp / "exp3")).trace
+def make_reference(tmp: Path, **kw: Any) -> pd.DataFrame:
+    df = load_run(run(short_config(**kw), tmp / "exp3")).trace
     return df.drop(columns=[c for c in TIMING if c in df.columns])
 
 
@@ -60,20 +58,23 @@ def short_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_short_run_matches_reference(short_run: Path) -> None:
+    """Every column of the short run within its measured tolerance
+    (``tests/reference/pomares2011/exp3.tol.json``, ``tests/measure_tolerances.py``).
+
+    Measured 2026-12-02 on an AMD EPYC (x86-64, AVX-512) over 6 OpenBLAS kernel families
+    and the hand's initial joints moved by +-1e-12 rad. The kernel family changes nothing
+    (the fingers are commanded in integer motor counts). The 1e-12 move does: the
+    pads touch the cylinder from row 3, and the contact points PyBullet keeps (4 per pair)
+    change with the last bits, so the pressures move by up to 4.9 kPa (7 quanta), the
+    support is lowered 9 rows earlier and the run ends with a tactile stop at row 141
+    instead of the end of the trajectory at row 159. Contacts are chaotic here: the 99
+    contact-driven columns are compared pointwise up to row 3 and by windowed mean/RMS
+    (the decisions by the share of each value) after it, the run's length within 10x the
+    measured 18 rows, the 40 columns no perturbation moved exactly. A 1 % change of the
+    closing speed or the motor targets one tick late fail it
+    (tests/test_reference_tolerances.py)."""
     got = load_run(short_run).trace.drop(columns=list(TIMING))
-    ref = pd.read_csv(REF)
-    assert len(got) == len(ref) and list(got.columns) == list(ref.columns)
-    floats = [c for c in ref.columns if ref[c].dtype.kind == "f"]
-    assert len(floats) > 60
-    for c in floats:
-        pressure = c.startswith(("tac_", "alg_p")) or (c[0] == "p" and c[1:].isdigit())
-        tol = PRESSURE_TOL_KPA if pressure and not c.endswith(("_F", "_Fmap")) else 1e-6
-        np.testing.assert_allclose(got[c].to_numpy(float), ref[c].to_numpy(float), atol=tol,
-                                   rtol=1e-6, err_msg=c)
-    for c in ("phase", "tactile_state", "alg_decision1", "alg_decision2", "alg_decision3"):
-        assert got[c].fillna("").astype(str).tolist() == ref[c].fillna("").astype(str).tolist(), c
-    for c in ("counts1", "counts2", "counts3"):
-        np.testing.assert_allclose(got[c], ref[c], atol=2, err_msg=c)
+    assert_matches_reference(REFERENCES["pomares2011/exp3"], got)
 
 
 def test_short_run_goes_through_every_phase(short_run: Path) -> None:
@@ -316,13 +317,3 @@ def test_the_ablation_config_is_consistent() -> None:
     check_config(Exp3Config())
     with pytest.raises(ConfigError, match="tactile_control"):
         check_config(dataclasses.replace(Exp3NoTactileConfig(), tactile_control=True))
-
-
-if __name__ == "__main__" and "--write-reference" in sys.argv:
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as d:
-        ref = make_reference(Path(d))
-    REF.parent.mkdir(parents=True, exist_ok=True)
-    ref.to_csv(REF, index=False, float_format="%.10g")
-    print(f"wrote {REF} ({len(ref)} rows)")

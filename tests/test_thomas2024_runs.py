@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from references import REFERENCES, assert_matches_reference
 
 import experiments.thomas2024.config as C
 from experiments.thomas2024 import EXPERIMENTS
@@ -25,8 +26,6 @@ from repro.sensors.proximity import ProximityRing
 REF_DIR = Path(__file__).parent / "reference" / "thomas2024"
 SHORT = 1.5  # [s] of simulated time per reference run
 TIMING_COLUMNS = ("ctrl_s", "camera_render_s", "qp_solve_s")
-#: Columns compared with the reference, and their absolute tolerances.
-COMPARED = {"q": 1e-5, "u": 1e-4, "e": 1e-3, "cbf": 1e-5, "dist": 1e-5}
 
 
 def short_config(name: str, **kw: object) -> C.Thomas2024Config:
@@ -35,31 +34,23 @@ def short_config(name: str, **kw: object) -> C.Thomas2024Config:
     return dataclasses.replace(exp.config_cls(), **fields)
 
 
-def _compared_columns(df: pd.DataFrame) -> dict[str, float]:
-    cols = {}
-    for c in df.columns:
-        for prefix, tol in COMPARED.items():
-            if (c.startswith(prefix) and c[len(prefix):len(prefix) + 1].isdigit()) or (
-                    prefix == "cbf" and "_cbf" in c) or (prefix == "dist" and
-                                                          c.startswith("dist_")):
-                cols[c] = tol
-    return cols
-
-
 @pytest.mark.parametrize("name", [e.name for e in EXPERIMENTS.experiments])
 def test_short_run_matches_reference(name: str, tmp_path: Path) -> None:
+    """Every column of the short run within its measured tolerance
+    (``tests/reference/thomas2024/<name>.tol.json``, ``tests/measure_tolerances.py``).
+
+    Measured 2026-12-02 on an AMD EPYC (x86-64, AVX-512) over 6 OpenBLAS kernel families
+    and the initial joints moved by +-1e-12 rad: the velocity-controlled arm contracts any
+    perturbation, nothing moves beyond the reference's 10-digit rounding but the
+    ground-truth distances (collision-library noise, <= 2.9e-7 m in ``dist_right``);
+    tolerance 10x the measured, the iteration counts and flags exact. A 1 % change of
+    lambda_4p, a flipped Jacobian row or the command one step late fail it by >= 1e5x
+    (tests/test_reference_tolerances.py)."""
     out = run(short_config(name), tmp_path / name)
     got = load_run(out)
     assert got.manifest["status"] == "completed"
-    ref_path = REF_DIR / f"{name}.csv"
-    ref = pd.read_csv(ref_path)
-    df = got.trace
-    assert len(df) == len(ref)
-    cols = _compared_columns(ref)
-    assert len(cols) > 40
-    for c, tol in cols.items():
-        np.testing.assert_allclose(df[c].to_numpy(float), ref[c].to_numpy(float), atol=tol,
-                                   err_msg=f"{name}: column {c}")
+    assert_matches_reference(REFERENCES[f"thomas2024/{name}"],
+                             got.trace.drop(columns=list(TIMING_COLUMNS)))
 
 
 def test_same_config_gives_identical_traces(tmp_path: Path) -> None:
