@@ -4,18 +4,25 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+LOCK := requirements.lock
 
-.PHONY: help figures results report test test-slow bench lint clean
+.PHONY: help figures results report test test-slow bench lint lock clean
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*##' $(MAKEFILE_LIST) | sed -E 's/:.*## /\t/' | expand -t 12
 
-$(STAMP): pyproject.toml
+define CHECK_PYTHON
 	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), \
 	  f"repro needs Python 3.11 (pybullet 3.2.7 wheels stop there); found {sys.version.split()[0]}"'
+endef
+
+# The exact versions of requirements.lock (-c: every package the ranges of pyproject.toml
+# pull in is held to its locked version; tests/test_lock.py checks that nothing else is).
+$(STAMP): pyproject.toml $(LOCK)
+	$(CHECK_PYTHON)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/pip install --quiet -c $(LOCK) -e '.[dev]'
 	@touch $(STAMP)
 
 figures: $(STAMP)  ## run missing/stale experiments, then every figure, claims.csv and REPORT.md
@@ -41,6 +48,18 @@ bench: $(STAMP)  ## controller-step, QP, NMPC and sensor timings -> results/benc
 lint: $(STAMP)  ## ruff and mypy
 	$(BIN)/ruff check repro experiments tests
 	$(BIN)/mypy repro experiments
+
+lock:  ## re-resolve pyproject.toml's ranges in a scratch venv and rewrite requirements.lock
+	$(CHECK_PYTHON)
+	rm -rf .lock-venv
+	$(PYTHON) -m venv .lock-venv
+	.lock-venv/bin/pip install --quiet --upgrade pip
+	.lock-venv/bin/pip install --quiet '.[dev]'
+	{ echo "# Exact versions for make figures / make test (pip constraints). Written by"; \
+	  echo "# 'make lock' from pyproject.toml's ranges; after a refresh, remake the committed"; \
+	  echo "# runs (tests/test_lock.py checks their manifests against this file)."; \
+	  .lock-venv/bin/pip freeze --exclude repro; } > $(LOCK)
+	rm -rf .lock-venv build *.egg-info
 
 clean:  ## remove the virtual environment and caches (results and figures are kept)
 	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache

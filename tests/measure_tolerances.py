@@ -6,6 +6,7 @@ moves a reference::
 
     .venv/bin/python tests/measure_tolerances.py               # every reference
     .venv/bin/python tests/measure_tolerances.py --only pomares2011/exp1 --keep /tmp/sens
+    .venv/bin/python tests/measure_tolerances.py --only committed   # make test-slow's reruns
 
 Each perturbation is a child process that reruns the references and writes their traces at
 full precision:
@@ -38,7 +39,9 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).parent))
-from references import REFERENCES, Reference  # noqa: E402
+from references import COMMITTED, REFERENCES, Reference  # noqa: E402
+
+ALL = {**REFERENCES, **COMMITTED}
 
 from repro.runs import compare  # noqa: E402
 
@@ -69,7 +72,7 @@ def child(perturbation: str, out: Path, ids: list[str]) -> None:
     _apply(perturbation)
     out.mkdir(parents=True, exist_ok=True)
     for rid in ids:
-        ref = REFERENCES[rid]
+        ref = ALL[rid]
         with tempfile.TemporaryDirectory() as d:
             df = ref.make(Path(d))
         df.to_csv(out / f"{rid.replace('/', '__')}.csv", index=False, float_format="%.17g")
@@ -93,7 +96,7 @@ def _run_children(ids: list[str], keep: Path) -> dict[str, Path]:
 
 
 def measure(ref: Reference, dirs: dict[str, Path], margin: float) -> dict[str, object]:
-    committed = pd.read_csv(ref.csv)
+    committed = ref.load()
     runs = {pert: pd.read_csv(d / f"{ref.id.replace('/', '__')}.csv")
             for pert, d in dirs.items()}
     return compare.measure_tolerances(committed, runs, margin=margin,
@@ -102,15 +105,19 @@ def measure(ref: Reference, dirs: dict[str, Path], margin: float) -> dict[str, o
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--only", nargs="+", default=sorted(REFERENCES))
+    ap.add_argument("--only", nargs="+", default=sorted(REFERENCES),
+                    help="reference ids (default: every short run; committed/<paper>.<name> "
+                         "for the committed runs make test-slow reruns)")
     ap.add_argument("--keep", type=Path, help="keep the perturbed traces here (resumable)")
     ap.add_argument("--margin", type=float, default=compare.DEFAULT_MARGIN)
     ap.add_argument("--child")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
-    unknown = sorted(set(args.only) - set(REFERENCES))
+    if args.only == ["committed"]:
+        args.only = sorted(COMMITTED)
+    unknown = sorted(set(args.only) - set(ALL))
     if unknown:
-        sys.exit(f"unknown reference(s) {unknown}; valid: {sorted(REFERENCES)}")
+        sys.exit(f"unknown reference(s) {unknown}; valid: {sorted(ALL)} or 'committed'")
     if args.child:
         child(args.child, args.out, args.only)
         return
@@ -118,8 +125,9 @@ def main() -> None:
         keep = args.keep or Path(tmp)
         dirs = _run_children(args.only, keep)
         for rid in args.only:
-            ref = REFERENCES[rid]
+            ref = ALL[rid]
             tol = measure(ref, dirs, args.margin)
+            ref.tol_json.parent.mkdir(parents=True, exist_ok=True)
             ref.tol_json.write_text(json.dumps(tol, indent=1, sort_keys=False) + "\n")
             print(compare.summary(rid, tol))
 

@@ -20,6 +20,7 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).parent))
 
 REF_ROOT = Path(__file__).parent / "reference"
+RESULTS = Path(__file__).resolve().parent.parent / "results"
 #: Timing columns of every paper (wall-clock, never compared).
 TIMING_COLUMNS = ("ctrl_s", "camera_render_s", "qp_solve_s", "solve_s")
 
@@ -35,18 +36,33 @@ class Reference:
     name: str
     make: Callable[..., pd.DataFrame]
     gains: tuple[str, ...] = ()
+    #: a committed run of results/ (its whole default config), not a short run
+    committed: bool = False
 
     @property
     def id(self) -> str:
-        return f"{self.paper}/{self.name}"
+        return (f"committed/{self.paper}.{self.name}" if self.committed
+                else f"{self.paper}/{self.name}")
 
     @property
     def csv(self) -> Path:
+        if self.committed:
+            return RESULTS / self.paper / self.name / "trace.csv"
         return REF_ROOT / self.paper / f"{self.name}.csv"
 
     @property
     def tol_json(self) -> Path:
+        if self.committed:
+            return REF_ROOT / "committed" / f"{self.paper}.{self.name}.tol.json"
         return REF_ROOT / self.paper / f"{self.name}.tol.json"
+
+    def load(self) -> pd.DataFrame:
+        """The reference trace as the tests read it (timing columns dropped)."""
+        if self.committed:
+            from repro.runs.trace import load_run
+
+            return _drop_timing(load_run(self.csv.parent).trace)
+        return pd.read_csv(self.csv)
 
 
 def _drop_timing(df: pd.DataFrame) -> pd.DataFrame:
@@ -120,6 +136,34 @@ REFERENCES: dict[str, Reference] = {
 }
 
 
+def _committed(exp_id: str) -> Reference:
+    paper, name = exp_id.split(".")
+
+    def make(tmp: Path, **kw: object) -> pd.DataFrame:
+        import dataclasses
+
+        from repro.runs.registry import find_experiment, load_papers
+        from repro.runs.trace import load_run
+
+        exp = find_experiment(load_papers(), exp_id)
+        config = dataclasses.replace(exp.config_cls(), **kw)  # the committed runs: defaults
+        return _drop_timing(load_run(exp.run(config, tmp / name)).trace)
+
+    gains = {"thomas2024": GAINS["thomas2024"], "chan2011": _chan_gains(name),
+             "pomares2011": GAINS.get(f"pomares2011/{name}", GAINS["pomares2011"])}[paper]
+    if name.startswith("exp3"):
+        gains = GAINS["pomares2011/exp3"]
+    return Reference(paper, name, make, gains, committed=True)
+
+
+#: Committed runs that ``make test-slow`` reruns whole and compares with results/.
+COMMITTED: dict[str, Reference] = {
+    r.id: r for r in (_committed(e) for e in (
+        "thomas2024.case1", "thomas2024.case2", "chan2011.simulation",
+        "chan2011.ibvs_saturated", "pomares2011.exp3", "pomares2011.exp3_no_tactile"))
+}
+
+
 def write_reference(ref: Reference, df: pd.DataFrame) -> None:
     """Write a reference trace as the tests read it (10 significant digits)."""
     ref.csv.parent.mkdir(parents=True, exist_ok=True)
@@ -140,7 +184,7 @@ def assert_matches_reference(ref: Reference, got: pd.DataFrame) -> None:
     if ``got`` leaves its reference's measured tolerances anywhere."""
     from repro.runs.compare import compare_to_reference
 
-    bad = compare_to_reference(got, pd.read_csv(ref.csv), load_tolerances(ref))
+    bad = compare_to_reference(got, ref.load(), load_tolerances(ref))
     if bad:
         lines = "\n  ".join(str(v) for v in bad[:12])
         raise AssertionError(f"{ref.id}: {len(bad)} comparisons outside their measured "
