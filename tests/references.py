@@ -159,7 +159,7 @@ def _committed(exp_id: str) -> Reference:
 #: Committed runs that ``make test-slow`` reruns whole and compares with results/.
 COMMITTED: dict[str, Reference] = {
     r.id: r for r in (_committed(e) for e in (
-        "thomas2024.case1", "thomas2024.case2", "chan2011.simulation",
+        "thomas2024.case1", "thomas2024.case2", "thomas2024.case2_coarse", "chan2011.simulation",
         "chan2011.ibvs_saturated", "pomares2011.exp3", "pomares2011.exp3_no_tactile"))
 }
 
