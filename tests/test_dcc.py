@@ -231,15 +231,25 @@ def test_distance_matches_pybullet(model: CollisionModel, pb: PyBulletReference)
             assert model.in_collision(q)
 
 
+#: Measured 2026-12-02 (the 10 configurations below, 6 OpenBLAS kernel families, the base
+#: moved by +-1e-12 and 1e-9 m): separation distances (fcl's GJK) move by <= 1.05e-8 m; the
+#: one penetration depth (EPA, -3.9 cm) by 2e-17 m under the default kernels and 1.0e-5 m
+#: under Sandybridge, Nehalem and Prescott (EPA stops on another face). Tolerances 10x.
+GJK_TOL = 1e-7
+EPA_TOL = 1e-4
+
+
 def test_distance_transform_of_base(urdf: Path) -> None:
-    """Moving the base and the obstacles together leaves every distance unchanged."""
+    """Moving the base and the obstacles together leaves every distance unchanged, to the
+    measured solver tolerances (GJK_TOL, EPA_TOL)."""
     T = _T((0.3, -0.2, 0.5), yaw=0.7, roll=0.4)
     moved = CollisionModel(urdf, JOINTS, [Box(b.name, b.size, T @ b.T_world) for b in OBSTACLES],
                            T_world_base=T)
     ref = CollisionModel(urdf, JOINTS, OBSTACLES)
     rng = np.random.default_rng(2)
     for q in _random_q(rng, 10):
-        assert moved.distance(q) == pytest.approx(ref.distance(q), abs=1e-7)  # GJK tolerance
+        d = ref.distance(q)
+        assert moved.distance(q) == pytest.approx(d, abs=GJK_TOL if d > 0 else EPA_TOL)
 
 
 def test_link_distances_min_is_distance(model: CollisionModel) -> None:

@@ -42,8 +42,8 @@ __all__ = ["CHAOTIC_FRACTION", "DEFAULT_MARGIN", "N_WINDOWS", "ROUNDING_RTOL",
            "measure_tolerances", "summary"]
 
 TOLERANCE_FORMAT = 1
-#: Tolerance = margin x the largest deviation measured over the perturbations: the kernel
-#: families measured here span a factor ~5 between one another (exp1 ``pa10_qd4``:
+#: Tolerance = margin x the largest deviation measured over the perturbations. ours: the
+#: kernel families measured here span a factor ~5 between one another (exp1 ``pa10_qd4``:
 #: 1.6e-6 to 8.8e-6 after 0.5 s), so one order of magnitude covers a machine we could not
 #: run by twice the spread we saw.
 DEFAULT_MARGIN = 10.0
@@ -51,10 +51,13 @@ DEFAULT_MARGIN = 10.0
 #: magnitude; twice that, so that a rounding of the reference never fails a test.
 ROUNDING_RTOL = 1e-9
 #: A column whose tolerance would exceed this share of its own excursion in the reference
-#: (max - min) at some row can no longer tell one trajectory from another there: from that
-#: row on it is compared by windowed statistics.
+#: (max - min) at some row is compared by windowed statistics from that row on. ours: a
+#: pointwise band wider than a tenth of the motion no longer tells one trajectory from
+#: another.
 CHAOTIC_FRACTION = 0.1
 #: The chaotic stretch of a column is cut into this many equal windows (fewer if shorter).
+#: ours: enough to see a drift within the stretch, each window long enough (>= 20 rows in
+#: the short runs) that its mean averages the chatter.
 N_WINDOWS = 5
 
 
