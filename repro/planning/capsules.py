@@ -72,7 +72,7 @@ class Capsule:
     def __post_init__(self) -> None:
         for name in ("p0", "p1"):
             v = np.array(getattr(self, name), dtype=float)  # a private copy
-            if v.shape != (3,) or not np.all(np.isfinite(v)):
+            if v.shape != (3,) or not all(math.isfinite(x) for x in v.tolist()):
                 raise ConfigError(f"Capsule.{name} must be 3 finite numbers [m], got {v}")
             v.setflags(write=False)
             object.__setattr__(self, name, v)

@@ -441,11 +441,14 @@ class _Runner:
                        f"{cam.name} point {j} visible again or no longer found")
         return Features(uv, found, Z)
 
-    def ground_truth(self, t: float, k: int, row: dict[str, Scalar]) -> None:
+    def ground_truth(self, t: float, k: int, row: dict[str, Scalar], log: bool = True) -> None:
+        """Distances (every step: events, minima) and, on a logged row, the moving bodies'
+        poses."""
         scene = self.ep.scene
-        for name, robot in {**self.observed, **self.robots}.items():
+        groups = {**self.observed, **self.robots}
+        for (name, robot), dists in zip(groups.items(), scene.distances_of(list(groups.values())),
+                                        strict=True):
             pre = robot.column_prefix
-            dists = scene.distances(robot)
             for body, d in dists.items():
                 row[f"{pre}dist_{body}"] = d
                 if d <= 0.0 and (name, body) not in self.collided:
@@ -465,6 +468,8 @@ class _Runner:
                 best = self.dist_min.get(col)
                 if np.isfinite(d) and (best is None or d < best[0]):
                     self.dist_min[col] = (float(d), t)
+        if not log:
+            return
         for moving in scene.moving_bodies():
             pos, quat = pose_to_pb(moving.T_world)
             for c, v in zip(pose_columns(moving.name), pos + quat, strict=True):
@@ -549,11 +554,12 @@ class _Runner:
                 pre = group.column_prefix
                 for i, (qi, qdi) in enumerate(zip(group.q(), group.qd(), strict=True)):
                     row[f"{pre}q{i + 1}"], row[f"{pre}qd{i + 1}"] = float(qi), float(qdi)
-            self.ground_truth(t, k, row)
+            log = k % ep.log_every == 0 or k == n_steps or stop is not None or res.log_row
+            self.ground_truth(t, k, row, log)
             if k == 0:
                 self.cols.check(row)
                 self.cols.write(self.out_dir / COLUMNS_FILE, row)
-            if k % ep.log_every == 0 or k == n_steps or stop is not None or res.log_row:
+            if log:
                 rec.record(row)
             if ep.video and k % ep.video_every == 0:
                 self.frames.append(ep.view.render(ep.scene.physics.client))

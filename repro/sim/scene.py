@@ -24,6 +24,7 @@ position [m] and quaternion (x, y, z, w).
 
 from __future__ import annotations
 
+import math
 import shutil
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
@@ -468,6 +469,8 @@ class Scene:
         if not body.moving:
             raise ConfigError(f"body {name!r} was not added with moving=True")
         T_world = np.asarray(T_world, dtype=float)
+        if np.array_equal(T_world, body.T_world):
+            return  # where it is: resetting a body to its own pose changes nothing
         _place(self.physics.client, body.ids, body, T_world)
         if body.render_ids:
             self._mirror_pending[name] = T_world.copy()
@@ -489,22 +492,44 @@ class Scene:
         penetration; ``max_distance`` when farther). A compound body: the minimum over its
         parts. ``robot`` may be a :class:`~repro.sim.robot.JointGroup`: then only the links
         it moves count, and the rest of its own body is skipped."""
-        full = getattr(robot, "robot", robot)  # a JointGroup's whole chain
-        links = getattr(robot, "links", None)
-        out = {}
-        for body in self.bodies.values():
-            if not body.collision or body.robot is full:
-                continue
-            d = max_distance
-            for bid in body.ids:
-                pts = p.getClosestPoints(full.body, bid, max_distance,
-                                         physicsClientId=self.physics.client)
-                if links is not None:
-                    pts = [pt for pt in pts if pt[3] in links]
-                if pts:
-                    d = min(d, min(pt[8] for pt in pts))
-            out[body.name] = float(d)
+        return self.distances_of([robot], max_distance)[0]
+
+    def distances_of(self, robots: Sequence[JointSet], max_distance: float = DISTANCE_CAP
+                     ) -> list[dict[str, float]]:
+        """:meth:`distances` of several robots, with one closest-points query per pair of
+        PyBullet bodies: joint groups of one URDF body (the PA-10, the mini-robot and the
+        hand of one chain) share each query and keep the points on their own links."""
+        queries: dict[tuple[int, int], dict[int, float]] = {}  # link of A -> closest [m]
+        client = self.physics.client
+        out = []
+        for robot in robots:
+            full = getattr(robot, "robot", robot)  # a JointGroup's whole chain
+            links = getattr(robot, "links", None)
+            own = None if links is None else frozenset(links)
+            dists = {}
+            for name, ids in self._others(full):
+                d = max_distance
+                for bid in ids:
+                    key = (full.body, bid)
+                    near = queries.get(key)
+                    if near is None:
+                        near = {}
+                        for pt in p.getClosestPoints(full.body, bid, max_distance,
+                                                     physicsClientId=client):
+                            if pt[8] < near.get(pt[3], math.inf):
+                                near[pt[3]] = pt[8]
+                        queries[key] = near
+                    for link, dl in near.items():
+                        if dl < d and (own is None or link in own):
+                            d = dl
+                dists[name] = float(d)
+            out.append(dists)
         return out
+
+    def _others(self, full: JointSet) -> list[tuple[str, list[int]]]:
+        """(name, PyBullet ids) of every body with a collision shape but ``full``."""
+        return [(b.name, b.ids) for b in self.bodies.values()
+                if b.collision and b.robot is not full]
 
     # -------------------------------------------------------- sensors, frames
     def add_mount(self, name: str, robot: str, parent_link: str, T_parent_frame: np.ndarray,
