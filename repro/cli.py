@@ -4,7 +4,7 @@ Subcommands::
 
     repro list [-v]                       experiments (and with -v their config fields)
     repro run EXP [--set KEY=VALUE]... [--video] [--out DIR [--force]]
-    repro results [--force] [--paper P] [--include-slow]
+    repro results [--force] [--paper P] [--include-slow] [-j N]
     repro figures [--paper P]             figures, then results/claims.csv
     repro report [--output REPORT.md]
 
@@ -22,6 +22,7 @@ import argparse
 import contextlib
 import dataclasses
 import json
+import os
 import signal
 import sys
 import time
@@ -120,6 +121,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="rerun even fresh experiments")
     p.add_argument("--paper", metavar="P", default=None, help="only this paper")
     p.add_argument("--include-slow", action="store_true", help="also run slow experiments")
+    p.add_argument("-j", "--jobs", type=_positive_int, default=None, metavar="N",
+                   help="run up to N experiments at once, each in its own process (default: "
+                        "the number of cores; 1: one after another in this process)")
     p.set_defaults(func=_cmd_results)
 
     p = sub.add_parser("figures", help="draw figures and evaluate claims from the traces")
@@ -372,6 +376,46 @@ def _running_elsewhere(run_dir: Path) -> str | None:
     return f"pid {manifest.get('pid', '?')} on {manifest.get('hostname', '?')}"
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if not 1 <= value <= 1024:
+        raise argparse.ArgumentTypeError(f"{value} is not in [1, 1024]")
+    return value
+
+
+def _run_todo_parallel(todo: Sequence[tuple[Experiment, Any, str]], results: Path,
+                       jobs: int, bar: Any) -> tuple[list[tuple[Experiment, str, Path]], int]:
+    """The stale experiments in worker processes (repro.runs.parallel); (ran, exit code)."""
+    from repro.runs.parallel import run_parallel
+
+    out_dirs = [registry.experiment_dir(results, exp) for exp, _, _ in todo]
+    for d in out_dirs:
+        d.mkdir(parents=True, exist_ok=True)
+
+    def one(i: int) -> Path | int:
+        exp, config, _ = todo[i]
+        return _run_interruptible(exp, config, out_dirs[i])
+
+    outcomes, fired = run_parallel(out_dirs, one, jobs, on_done=lambda o: bar.update(1))
+    ran, code = [], 0
+    for o in outcomes:
+        exp, _, reason = todo[o.index]
+        if o.status == "ran":
+            ran.append((exp, reason, o.out_dir))
+        else:
+            detail = {"interrupted": "closed as interrupted", "crashed": "crashed (see its "
+                      "manifest)", "lost": f"worker died (exit {o.exitcode}); marked "
+                      "interrupted", "not_started": "not started"}[o.status]
+            print(f"{o.status:<6} {exp.id}  ({detail}) -> {o.out_dir}", file=sys.stderr)
+            code = code or (1 if o.status in ("crashed", "lost") else 0)
+    if fired is not None:
+        code = 128 + fired
+    return ran, code
+
+
 def _cmd_results(args: argparse.Namespace) -> int:
     papers = _select_papers(registry.load_papers(), args.paper)
     fixed = _fix_dead_runs(papers, args.results)
@@ -401,6 +445,8 @@ def _cmd_results(args: argparse.Namespace) -> int:
     for run_dir, manifest in fixed:
         print(f"interrupted  {run_dir}  ({manifest['reason']})")
     ran: list[tuple[Experiment, str, Path]] = []
+    jobs = args.jobs if args.jobs is not None else (os.cpu_count() or 1)
+    code = 0
     with tqdm(
         total=len(todo),
         desc="experiments",
@@ -408,6 +454,9 @@ def _cmd_results(args: argparse.Namespace) -> int:
         file=sys.stderr,
         disable=not sys.stderr.isatty(),
     ) as bar:
+        if jobs > 1 and len(todo) > 1:
+            ran, code = _run_todo_parallel(todo, args.results, jobs, bar)
+            todo = []
         for exp, config, reason in todo:
             bar.set_postfix_str(exp.id)
             out_dir = registry.experiment_dir(args.results, exp)
@@ -432,7 +481,7 @@ def _cmd_results(args: argparse.Namespace) -> int:
     if fixed:
         counts += f", {len(fixed)} marked interrupted"
     print(counts)
-    return 0
+    return code
 
 
 def _cmd_figures(args: argparse.Namespace) -> int:

@@ -336,7 +336,7 @@ def test_list_broken_entry_point_exits_2(monkeypatch, capsys):
 
 
 def test_results_runs_stale_then_nothing(papers, runners, tmp_path, capsys):
-    assert cli.main(["--results", str(tmp_path), "results"]) == 0
+    assert cli.main(["--results", str(tmp_path), "results", "-j", "1"]) == 0
     ran = {k for k, r in runners.items() if r.calls}
     assert ran == {"fake.case1", "other.case1", "other.case3"}  # fake.case2 is slow
     out = capsys.readouterr().out
@@ -360,14 +360,14 @@ def test_results_reruns_crashed_and_changed(papers, runners, tmp_path):
     )
     fake = papers["fake"].experiments[0]
     _write_manifest(tmp_path, fake, status="completed", config_hash="old")
-    assert cli.main(["results", "--results", str(tmp_path)]) == 0
+    assert cli.main(["results", "--results", str(tmp_path), "-j", "1"]) == 0
     assert len(runners["other.case3"].calls) == 1
     assert len(runners["fake.case1"].calls) == 1
     assert runners["other.case1"].calls == []
 
 
 def test_results_force_slow_and_paper(papers, runners, tmp_path, capsys):
-    argv = ["--results", str(tmp_path), "results", "--paper", "fake", "--include-slow"]
+    argv = ["--results", str(tmp_path), "results", "--paper", "fake", "--include-slow", "-j", "1"]
     assert cli.main(argv) == 0
     assert cli.main([*argv, "--force"]) == 0
     assert len(runners["fake.case1"].calls) == 2

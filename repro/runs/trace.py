@@ -111,6 +111,7 @@ MANIFEST_KEYS = (
     "started_at",
     "ended_at",
     "wall_time_s",
+    "concurrent_runs",
     "hostname",
     "pid",
     "boot_id",
@@ -266,6 +267,19 @@ def _repro_version() -> str:
         return importlib.metadata.version("repro")
     except importlib.metadata.PackageNotFoundError:
         return "unknown"
+
+
+CONCURRENT_RUNS_ENV = "REPRO_CONCURRENT_RUNS"
+
+
+def concurrent_runs() -> int:
+    """How many runs shared the machine with this one (``repro results -j N`` sets
+    :data:`CONCURRENT_RUNS_ENV` in its workers; 1 for a run on its own): its wall time and
+    timing columns were measured with that many runs on the cores."""
+    try:
+        return max(1, int(os.environ.get(CONCURRENT_RUNS_ENV, "1")))
+    except ValueError:
+        return 1
 
 
 def environment() -> dict[str, Any]:
@@ -600,6 +614,7 @@ class TraceRecorder:
             "started_at": self._started_at,
             "ended_at": ended_at,
             "wall_time_s": wall_time_s,
+            "concurrent_runs": concurrent_runs(),
             "hostname": _hostname(),
             "pid": os.getpid(),
             "boot_id": _boot_id(),
