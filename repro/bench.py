@@ -1,7 +1,9 @@
 """``make bench``: timings of every paper's benchmarks -> results/bench.csv.
 
 Speed is measured here, not asserted in tests. Columns: benchmark, median_s,
-p95_s, n, machine (CPU model and core count).
+p95_s, n, machine (CPU model and core count). The ``real_time_factor`` rows (simulated time
+over the loop's wall time) and ``loop_split`` rows (each part's share of it) are ratios in
+the ``median_s`` column; they come from short runs timed whole, one per camera mode.
 """
 
 from __future__ import annotations
@@ -26,6 +28,49 @@ def timing_row(name: str, samples: list[float] | np.ndarray) -> dict[str, object
             "p95_s": float(np.percentile(a, 95)), "n": int(a.size)}
 
 
+#: Short runs whose loop is timed whole (real-time factor and split), per camera mode:
+#: (experiment id, simulated seconds). ours: long enough that set-up is < 10 % of the wall
+#: time, and for pomares2011 exp2 to include the operator's approach (from 8 s).
+REALTIME_RUNS = (("pomares2011.exp1", 6.0), ("pomares2011.exp2", 12.0),
+                 ("thomas2024.case1", 10.0), ("chan2011.simulation", 10.0))
+#: Rendered pomares2011 runs cost ~16 ms a step: a shorter stretch [s].
+RENDERED_S = {"pomares2011.exp1": 1.0, "pomares2011.exp2": 1.0}
+
+
+def realtime_rows(only_paper: str | None = None) -> list[dict[str, object]]:
+    """Rows ``<id>.real_time_factor[<mode>]`` (simulated / loop wall time, in ``median_s``:
+    a ratio, not seconds) and ``<id>.loop_split[<mode>,<part>]`` (share of the loop's wall
+    time), from the manifest summary every run writes (``repro.sim.episode.TIMING_SPLIT``)."""
+    import dataclasses
+    import json
+    import tempfile
+
+    from repro.runs.registry import find_experiment
+
+    papers = load_papers()
+    rows: list[dict[str, object]] = []
+    for exp_id, duration in REALTIME_RUNS:
+        if only_paper and not exp_id.startswith(only_paper + "."):
+            continue
+        exp = find_experiment(papers, exp_id)
+        for mode in ("exact", "render"):
+            dur = RENDERED_S.get(exp_id, duration) if mode == "render" else duration
+            cfg = dataclasses.replace(exp.config_cls(), camera_mode=mode, duration=dur)
+            with tempfile.TemporaryDirectory() as d:
+                out = exp.run(cfg, Path(d) / "run")
+                timing = json.loads((out / "manifest.json").read_text())["summary"]["timing"]
+            rtf = float(timing["real_time_factor"])
+            rows.append({"benchmark": f"{exp_id}.real_time_factor[{mode}]", "median_s": rtf,
+                         "p95_s": rtf, "n": 1})
+            wall = float(timing["loop_wall_s"])
+            for part, v in timing.items():
+                if part.endswith("_s") and part != "loop_wall_s":
+                    share = float(v) / wall
+                    rows.append({"benchmark": f"{exp_id}.loop_split[{mode},{part[:-2]}]",
+                                 "median_s": share, "p95_s": share, "n": 1})
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m repro.bench")
     parser.add_argument("--results", type=Path, default=Path("results"))
@@ -33,6 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     machine = f"{cpu_name()} ({os.cpu_count()} cores)"
     rows: list[dict[str, object]] = []
+    rows += [{**r, "machine": machine} for r in realtime_rows(args.paper)]
     for key, paper in load_papers().items():
         if paper.bench is None or (args.paper and key != args.paper):
             continue

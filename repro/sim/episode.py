@@ -48,6 +48,13 @@ __all__ = ["CameraRig", "Episode", "Features", "Observation", "Sensor", "StepRes
 
 Scalar = float | int | str | bool
 
+#: Wall time of the loop, split (manifest summary "timing") [s]: moving bodies and state
+#: reads (scene), cameras and other sensors with their audit (sensors), the controller,
+#: the drives' commands and the row's joint columns (drives), ground-truth distances and
+#: poses (audit), the trace (logging), the drives' substeps and stepSimulation (physics).
+TIMING_SPLIT = ("scene_s", "sensors_s", "controller_s", "drives_s", "audit_s", "logging_s",
+                "physics_s")
+
 #: Visibility rays end this far above the dot, along the dot's normal (+z of the target
 #: frame) [m]: PyBullet's ray test meets a face up to ~1 mm off, and the dots stand only
 #: 0.1-0.3 mm proud of their support; a ray that reaches the lifted point unblocked sees
@@ -497,9 +504,13 @@ class _Runner:
         status, reason = "completed", "duration reached"
         n_commanded = 0
         progress = _Progress(n_steps + 1, dt)
+        clock = time.perf_counter
+        split = dict.fromkeys(TIMING_SPLIT, 0.0)  # [s] summed over the steps
+        t_start = clock()
         k = 0
         for k in range(n_steps + 1):
             progress.update(k)
+            tic0 = clock()
             t = k * dt
             row: dict[str, Scalar] = {"t": t, "step": k}
             for name, T_of_t in ep.movers.items():
@@ -510,8 +521,11 @@ class _Runner:
             for name, chain in self.chains.items():
                 q.setdefault(name, chain.q())
                 qd.setdefault(name, chain.qd())
+            tic1 = clock()
+            split["scene_s"] += tic1 - tic0
             feats = {c.name: self.measure(c, q[c.robot.name], t, k, row) for c in ep.cameras}
             readings = {s.name: s.read(t, q) for s in ep.sensors}
+            split["sensors_s"] += clock() - tic1
             failed_sensor = None
             for s in ep.sensors:
                 row.update(s.columns(readings[s.name]))
@@ -523,6 +537,8 @@ class _Runner:
             t_ctrl = time.perf_counter() - tic
             row["ctrl_s"] = t_ctrl
             self.t_ctrl += t_ctrl
+            split["controller_s"] += t_ctrl
+            tic2 = clock()
             row.update(res.columns)
             for kind, detail in res.events:
                 rec.event(t, k, kind, detail)
@@ -555,12 +571,17 @@ class _Runner:
                 for i, (qi, qdi) in enumerate(zip(group.q(), group.qd(), strict=True)):
                     row[f"{pre}q{i + 1}"], row[f"{pre}qd{i + 1}"] = float(qi), float(qdi)
             log = k % ep.log_every == 0 or k == n_steps or stop is not None or res.log_row
+            tic3 = clock()
+            split["drives_s"] += tic3 - tic2
             self.ground_truth(t, k, row, log)
+            tic4 = clock()
+            split["audit_s"] += tic4 - tic3
             if k == 0:
                 self.cols.check(row)
                 self.cols.write(self.out_dir / COLUMNS_FILE, row)
             if log:
                 rec.record(row)
+            split["logging_s"] += clock() - tic4
             if ep.video and k % ep.video_every == 0:
                 self.frames.append(ep.view.render(ep.scene.physics.client))
             if snap_every and k % snap_every == 0:
@@ -570,11 +591,17 @@ class _Runner:
                     reason = stop[1]
                     rec.event(t, k, stop[0], stop[1])
                 break
+            tic5 = clock()
             for i in range(1, world.steps_per_control + 1):
                 for drive in ep.drives.values():
                     drive.substep(i, h)
                 world.step_physics()
+            split["physics_s"] += clock() - tic5
         progress.close()
+        wall = clock() - t_start
+        rec.summary["timing"] = {
+            **{key: round(v, 6) for key, v in split.items()}, "loop_wall_s": round(wall, 6),
+            "real_time_factor": round(k * dt / wall, 4) if wall > 0 else None}
         if status == "completed" and n_commanded == 0:
             status, reason = "failed", (f"the controller never produced a command: all {k + 1} "
                                         "steps fell back (e.g. every QP failed, no features)")
