@@ -21,6 +21,7 @@ from repro.control.cbf_qp import (
     least_squares_ibvs,
 )
 from repro.control.qp import SOLVERS
+from repro.errors import UnknownChoiceError
 from repro.sim.panda import PANDA_LIMITS
 
 N, M = 7, 36  # Panda joints; 2 rings x 18 sensors (thomas2024)
@@ -88,7 +89,7 @@ def test_cbf_inequalities_formula() -> None:
 
 
 # --------------------------------------------------------------------------------------
-# Closed forms, both solvers
+# Closed forms, every solver
 # --------------------------------------------------------------------------------------
 
 
@@ -159,6 +160,8 @@ def test_single_active_row_matches_closed_form(solver: str) -> None:
     ("proxsuite", 200),
     ("osqp", None),
     ("osqp", BIG_BUDGET),
+    ("daqp", None),
+    ("quadprog", None),
 ])
 def test_blocked_optimum_is_a_local_minimum(solver: str, max_iter: int | None) -> None:
     """thomas2024 eq. (21): c = kappa0 a and b = 0 (a sensor at its threshold, the task
@@ -217,6 +220,8 @@ def _daqp(H: np.ndarray, g: np.ndarray, A: np.ndarray, b: np.ndarray, lb: np.nda
     ("proxsuite", 200),
     ("osqp", None),
     ("osqp", BIG_BUDGET),
+    ("daqp", None),
+    ("quadprog", None),
 ])
 def test_infeasible_rows_are_relaxed(solver: str, max_iter: int | None) -> None:
     """Two opposite sensors both under their threshold: a'u >= 0.5 and -a'u >= 0.5."""
@@ -234,6 +239,8 @@ def test_infeasible_rows_are_relaxed(solver: str, max_iter: int | None) -> None:
     assert elapsed < 0.5
     assert res.status == "relaxed"
     assert res.qp_status in ("infeasible", "max_iter")
+    if solver in ("daqp", "quadprog"):  # the active-set backends certify it
+        assert res.qp_status == "infeasible"
     assert np.all(np.isfinite(res.u))
     assert np.all(np.abs(res.u) <= QD_MAX + 1e-9)
     assert res.slack.shape == (M,)
@@ -288,6 +295,9 @@ def _random_cbf_qp(rng: np.random.Generator, max_scale: float = 8.0
     ("osqp", None, False),
     ("proxsuite", 200, True),
     ("osqp", BIG_BUDGET, False),
+    ("daqp", None, False),
+    ("daqp", None, True),
+    ("quadprog", None, False),
 ])
 def test_random_cbf_qps_match_daqp(solver: str, max_iter: int | None, fresh: bool) -> None:
     """100 independent random QPs through one warm-started controller, or a fresh
@@ -331,11 +341,13 @@ def test_proxsuite_cold_solution_is_accurate() -> None:
 
 
 # Budgets between what the easy step needs and what the hard QP needs (seed 8): proxsuite
-# 2 and 11 outer iterations, OSQP 75 and 375 ADMM iterations (convergence checked every 25).
-_SMALL_CAP = {"proxsuite": 4, "osqp": 100}
+# 2 and 11 outer iterations, OSQP 75 and 375 ADMM iterations (convergence checked every 25),
+# DAQP 1 and 14 active-set iterations (warm after the easy step as cold), quadprog 1 and 10
+# (always cold: one attempt, its true count, see the next test).
+_SMALL_CAP = {"proxsuite": 4, "osqp": 100, "daqp": 4, "quadprog": 4}
 
 
-@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("solver", [s for s in SOLVERS if s != "quadprog"])
 def test_hard_qp_over_budget_goes_to_the_fallback(solver: str) -> None:
     """The hard QP needs more iterations than max_iter: it is "max_iter" (never "solved"),
     after a warm attempt and a cold retry each within the budget, and u comes from the
@@ -372,6 +384,39 @@ def test_hard_qp_over_budget_goes_to_the_fallback(solver: str) -> None:
     np.testing.assert_allclose(res.u, x_ref[:N], atol=1e-6)
     np.testing.assert_allclose(res.slack, x_ref[N:], atol=1e-6)
     np.testing.assert_allclose(res.u, needs.u, atol=1e-2)
+
+
+def test_quadprog_hard_qp_over_budget_goes_to_the_fallback() -> None:
+    """quadprog runs to completion: a hard QP needing 10 main iterations with a budget of 4
+    is "max_iter" with its true count in one (cold) attempt, and u comes from the relaxed QP,
+    the exact slack-QP solution (as for the backends that stop at the budget)."""
+    cap = _SMALL_CAP["quadprog"]
+    rng = np.random.default_rng(8)
+    obj, ineq = _random_cbf_qp(rng)
+    needs = CBFQPController(N, M, solver="quadprog").step(obj, ineq, QD_MAX)
+    assert needs.status == "solved" and needs.solution.iterations > cap
+    ctrl = CBFQPController(N, M, solver="quadprog", max_iter=cap)
+    res = ctrl.step(obj, ineq, QD_MAX)
+    assert res.qp_status == "max_iter" and res.status == "relaxed"
+    assert res.solution.iterations == needs.solution.iterations
+    assert res.solution.attempts == 1
+    rs = res.relaxed_solution
+    assert rs is not None and rs.status == "solved"
+    assert res.iterations == rs.iterations <= ctrl.relaxed_max_iter
+    H = np.zeros((N + M, N + M))
+    H[:N, :N] = obj.H
+    H[N:, N:] = ctrl.slack_weight * np.eye(M)
+    x_ref, _ = _daqp(H, np.r_[obj.g, np.zeros(M)], np.hstack([ineq.A, np.eye(M)]), ineq.b,
+                     np.r_[-QD_MAX, np.zeros(M)], np.r_[QD_MAX, np.full(M, np.inf)])
+    np.testing.assert_allclose(res.u, x_ref[:N], atol=1e-9)
+    np.testing.assert_allclose(res.u, needs.u, atol=1e-2)
+
+
+def test_unknown_solver_is_refused_with_the_choices() -> None:
+    with pytest.raises(UnknownChoiceError,
+                       match="unknown QP solver 'gurobi'; valid choices: daqp, osqp, proxsuite, "
+                             "quadprog"):  # fmt: skip
+        CBFQPController(N, M, solver="gurobi")
 
 
 def test_failed_step_reports_the_hard_qp() -> None:

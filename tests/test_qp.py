@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import daqp  # exact active-set reference; dev dependency in pyproject.toml
 import numpy as np
@@ -23,6 +24,10 @@ from repro.errors import ConfigError, UnknownChoiceError
 # Franka Emika Panda joint velocity limits [rad/s] (official datasheet).
 V_MAX = np.array([2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26])
 N_JOINTS, N_SENSORS = 7, 36
+#: Exact (active-set) backends: answers to rounding, infeasibility certified.
+ACTIVE_SET = ("daqp", "quadprog")
+#: Backends with a warm start (quadprog has none: every solve is cold).
+WARM = tuple(s for s in SOLVERS if s != "quadprog")
 
 
 def _assert_kkt_small(problem: QPProblem, sol: QPSolution, tol: float = 1e-6) -> None:
@@ -142,6 +147,47 @@ def test_infinite_and_large_finite_bounds_agree(solver: str) -> None:
     np.testing.assert_allclose(s_big.z, s_inf.z, atol=1e-8)
 
 
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_two_sided_row_at_either_bound(solver: str) -> None:
+    """min 1/2 |x|^2 + g'x s.t. -1 <= x_1 + x_2 <= 2, both sides finite on one row.
+
+    g = (-3, -3): free optimum (3, 3), a'x = 6 > 2: x = (1, 1), 1 - 3 + z = 0 -> z = +2
+    (upper active). g = (3, 3): a'x = -6 < -1: x = (-1/2, -1/2), z = -5/2 (lower active).
+    """
+    C, l, u = np.array([[1.0, 1.0]]), np.array([-1.0]), np.array([2.0])
+    qp = QPSolver(2, 1, solver)
+    for g, x_star, z_star in (([-3.0, -3.0], [1.0, 1.0], 2.0),
+                              ([3.0, 3.0], [-0.5, -0.5], -2.5)):  # fmt: skip
+        problem = QPProblem(np.eye(2), np.array(g), C, l, u, None, None)
+        sol = qp.solve(problem)
+        assert sol.status == "solved"
+        np.testing.assert_allclose(sol.x, x_star, atol=1e-8)
+        np.testing.assert_allclose(sol.z, [z_star], atol=1e-8)
+        np.testing.assert_allclose(lower_multipliers(sol), [max(-z_star, 0.0)], atol=1e-8)
+        _assert_kkt_small(problem, sol, 1e-7)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_equality_row_and_fixed_variable(solver: str) -> None:
+    """l == u on a row and lb == ub on a variable: free-sign multipliers.
+
+    min 1/2 |x|^2 s.t. x_1 + 2 x_2 = 5, x_2 = 1/2 (box), |x_1| <= 10: x = (4, 1/2);
+    stationarity x_1 + z = 0 -> z = -4, x_2 + 2 z + zb_2 = 0 -> zb_2 = +7.5. With the row
+    at -5 instead: x = (-6, 1/2), z = +6 (the multiplier changes sign), zb_2 = -12.5.
+    """
+    qp = QPSolver(2, 1, solver)
+    for b, x_star, z_star, zb_star in ((5.0, [4.0, 0.5], [-4.0], [0.0, 7.5]),
+                                       (-5.0, [-6.0, 0.5], [6.0], [0.0, -12.5])):  # fmt: skip
+        problem = QPProblem(np.eye(2), np.zeros(2), np.array([[1.0, 2.0]]), np.array([b]),
+                            np.array([b]), np.array([-10.0, 0.5]), np.array([10.0, 0.5]))
+        sol = qp.solve(problem)
+        assert sol.status == "solved", b
+        np.testing.assert_allclose(sol.x, x_star, atol=1e-8)
+        np.testing.assert_allclose(sol.z, z_star, atol=1e-8)
+        np.testing.assert_allclose(sol.z_box, zb_star, atol=1e-8)
+        _assert_kkt_small(problem, sol, 1e-7)
+
+
 def test_osqp_and_proxsuite_raw_duals_have_the_same_sign() -> None:
     """The backends themselves (not this module) share the sign convention, as does daqp.
 
@@ -180,6 +226,34 @@ def test_osqp_and_proxsuite_raw_duals_have_the_same_sign() -> None:
     for y in (z_prox, y_osqp):  # H x + g + [C; I]^T y = 0
         np.testing.assert_allclose(H @ qp.results.x + g + np.vstack([C, np.eye(3)]).T @ y, 0.0,
                                    atol=1e-6)  # fmt: skip
+
+
+def test_quadprog_raw_multipliers_recombine_into_the_convention() -> None:
+    """quadprog itself: min 1/2 x'Gx - a'x s.t. Cq'x >= b returns lambda >= 0 with
+    G x - a = Cq lambda. The problem of the previous test, written one-sided (lower rows
+    ``c'x >= l``, upper rows ``-c'x >= -u``): z = lambda_upper - lambda_lower gives proxsuite's
+    duals exactly, and that is what the backend returns."""
+    import quadprog
+
+    H = np.diag([1.0, 2.0, 3.0])
+    g = np.array([1.0, -1.0, 0.5])
+    C = np.array([[1.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    lb, ub = np.full(3, -10.0), np.array([10.0, 0.2, 10.0])
+    # Columns: row 1 >= 1, box x >= lb, then row 2 <= -1 and box x <= ub as -(.) >= -(.).
+    Cq = np.hstack([C[:1].T, np.eye(3), -C[1:].T, -np.eye(3)])
+    bq = np.r_[1.0, lb, 1.0, -ub]
+    x, _, _, iters, lam, _ = quadprog.solve_qp(H, -g, Cq, bq, 0)
+    np.testing.assert_allclose(x, [0.8, 0.2, -1.0], atol=1e-12)
+    assert np.all(lam >= 0.0) and iters[0] >= 1
+    np.testing.assert_allclose(H @ x + g - Cq @ lam, 0.0, atol=1e-12)
+    z = np.r_[-lam[0], lam[4]]  # lower row: -lambda; upper row: +lambda
+    z_box = lam[5:8] - lam[1:4]
+    np.testing.assert_allclose(np.r_[z, z_box], [-1.8, 2.5, 0.0, 2.4, 0.0], atol=1e-12)
+    problem = QPProblem(H, g, C, np.array([1.0, -np.inf]), np.array([np.inf, -1.0]), lb, ub)
+    sol = QPSolver(3, 2, "quadprog").solve(problem)
+    assert sol.status == "solved"
+    np.testing.assert_allclose(sol.z, z, atol=1e-12)
+    np.testing.assert_allclose(sol.z_box, z_box, atol=1e-12)
 
 
 # --------------------------------------------------------------------------------------
@@ -253,7 +327,7 @@ def cbf_problems() -> list[tuple[QPProblem, tuple[np.ndarray, np.ndarray, np.nda
     ("solver", "max_iter"),
     # OSQP's ADMM needs > 1000 iterations on ~1% of these strongly constrained problems
     # (they come back as "max_iter" with the default budget, see the next test).
-    [("proxsuite", 1000), ("osqp", 10000)],
+    [("proxsuite", 1000), ("osqp", 10000), ("daqp", 1000), ("quadprog", 1000)],
 )
 def test_random_cbf_qps_match_active_set_solver(solver: str, max_iter: int, cbf_problems) -> None:
     qp = QPSolver(N_JOINTS, N_SENSORS, solver, max_iter=max_iter)
@@ -367,6 +441,8 @@ def test_infeasible_is_reported_not_raised(solver: str) -> None:
     sol = qp.solve(infeasible)
     elapsed = time.perf_counter() - t0
     assert sol.status in ("infeasible", "max_iter")
+    if solver in ACTIVE_SET:  # certified (DAQP exit flag -1, quadprog's ValueError)
+        assert sol.status == "infeasible"
     assert elapsed < 1.0
     assert sol.iterations <= 1000  # the default budget, per attempt
     assert sol.total_iterations <= 2 * 1000  # a warm attempt plus at most one cold retry
@@ -422,6 +498,9 @@ def test_warm_sequence_follows_changing_data(solver: str) -> None:
         {"H": np.diag([1.0, 4.0]), "g": np.array([-0.3, 0.2])},
         {"C": np.array([[1.0, -1.0]]), "l": np.array([0.9]), "u": np.array([1.1])},
         {"C": np.array([[1.0, -1.0]]), "l": np.array([-1.1]), "u": np.array([-0.9])},
+        {"l": np.array([0.4]), "u": np.array([0.4])},  # an equality row (DAQP: new setup)
+        {"l": np.array([0.4]), "u": np.array([0.4]), "g": np.array([1.0, 3.0])},
+        {"lb": np.array([-1.0, 0.3]), "ub": np.array([1.0, 0.3])},  # a fixed variable
     ]
     qp = QPSolver(2, 1, solver)
     for change in changes:
@@ -446,8 +525,11 @@ def test_unknown_solver_name_lists_valid_ones() -> None:
     assert isinstance(err, ConfigError)
     assert err.kind == "QP solver" and err.value == "gurobi"
     assert err.choices == sorted(SOLVERS)
+    assert set(SOLVERS) == {"proxsuite", "osqp", "daqp", "quadprog"}
     for name in SOLVERS:
         assert name in str(err)
+    with pytest.raises(UnknownChoiceError, match="daqp, osqp, proxsuite, quadprog"):
+        QPSolver(2, 1, solver="DAQP")  # names are case-sensitive
 
 
 def test_wrong_shapes_raise() -> None:
@@ -546,13 +628,14 @@ def test_solved_degenerate_qps_stay_within_the_budget() -> None:
 
 # Budgets between the easy QP's needs and the hard one's (cold and warm): proxsuite needs 2
 # outer iterations on _EASY, >= 9 on _cbf_sequence(3); OSQP checks convergence every 25
-# ADMM iterations: 100 on _EASY, >= 175 on _cbf_sequence(3).
-_SMALL_CAP = {"proxsuite": 4, "osqp": 125}
+# ADMM iterations: 100 on _EASY, >= 175 on _cbf_sequence(3); DAQP 1 and 11 active-set
+# iterations (warm after _EASY as cold: its working set there is empty).
+_SMALL_CAP = {"proxsuite": 4, "osqp": 125, "daqp": 4}
 _EASY = QPProblem(np.eye(N_JOINTS), np.full(N_JOINTS, 0.01), np.ones((N_SENSORS, N_JOINTS)),
                   np.full(N_SENSORS, -1.0), np.full(N_SENSORS, np.inf), -V_MAX, V_MAX)
 
 
-@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("solver", WARM)
 def test_over_budget_is_max_iter_even_after_a_cold_retry(solver: str) -> None:
     """A QP that needs more than the budget, warm-started: the warm attempt and the cold
     retry each run out; the result is "max_iter" with the retry's count (= the budget),
@@ -575,14 +658,16 @@ def test_over_budget_is_max_iter_even_after_a_cold_retry(solver: str) -> None:
 def _starve_warm_backend(qp: QPSolver) -> None:
     """Give the warm backend state a budget of 1 iteration for its next solve, so that the
     warm attempt fails and :meth:`QPSolver.solve` retries cold with the real budget."""
-    backend = qp._backend
+    backend: Any = qp._backend
     if qp.solver == "proxsuite":
-        backend._qp.settings.max_iter = 1  # type: ignore[union-attr]
+        backend._qp.settings.max_iter = 1
+    elif qp.solver == "daqp":
+        backend._model.settings = {"iter_limit": 1}
     else:
-        backend._solver.update_settings(max_iter=1)  # type: ignore[union-attr]
+        backend._solver.update_settings(max_iter=1)
 
 
-@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("solver", WARM)
 def test_iterations_are_those_of_the_cold_retry(solver: str) -> None:
     """After a failed warm attempt the solution, status and iterations are the cold
     retry's: the same as a fresh solver's on that QP (cold solves are deterministic);
@@ -610,11 +695,11 @@ def test_proxsuite_budget_sets_both_loops() -> None:
     p = _cbf_sequence(seed=3, count=1)[0]
     qp = QPSolver(N_JOINTS, N_SENSORS, "proxsuite", max_iter=50)
     assert qp.solve(p).status == "solved"
-    settings = qp._backend._qp.settings  # type: ignore[union-attr]
+    settings = qp._backend._qp.settings  # type: ignore[attr-defined]
     assert (settings.max_iter, settings.max_iter_in) == (50, 50)
     qp2 = QPSolver(N_JOINTS, N_SENSORS, "proxsuite", max_iter=50, max_iter_in=7)
     sol = qp2.solve(p)
-    assert qp2._backend._qp.settings.max_iter_in == 7  # type: ignore[union-attr]
+    assert qp2._backend._qp.settings.max_iter_in == 7  # type: ignore[attr-defined]
     assert sol.iterations <= sol.inner_iterations <= 50 * (7 + 1)
 
 
@@ -624,3 +709,251 @@ def test_bad_budget_is_rejected(bad: float) -> None:
         QPSolver(2, 1, "proxsuite", max_iter=bad)  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="max_iter_in"):
         QPSolver(2, 1, "proxsuite", max_iter_in=bad)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------------------
+# 7. The exact active-set backends (DAQP, quadprog)
+# --------------------------------------------------------------------------------------
+
+
+def _random_general_qp(rng: np.random.Generator) -> QPProblem:
+    """A strictly convex QP (n = 7, m = 12) with every kind of row, feasible by construction.
+
+    Rows around a feasible x0: two-sided ``l < u`` (~40%), lower-only, upper-only, and up to
+    two equality rows ``l == u``; a box [-1, 1] with sometimes one fixed variable; a linear
+    term large enough that several rows and bounds are active, at either side.
+    """
+    n, m = N_JOINTS, 12
+    M = rng.standard_normal((n, n))
+    C = rng.standard_normal((m, n))
+    x0 = rng.uniform(-0.5, 0.5, n)
+    c0 = C @ x0
+    kind = rng.choice(4, size=m, p=[0.4, 0.25, 0.25, 0.1])  # two-sided, lower, upper, eq
+    kind[np.flatnonzero(kind == 3)[2:]] = 0
+    l = c0 - rng.exponential(0.3, m)
+    u = c0 + rng.exponential(0.3, m)
+    l[kind == 2] = -np.inf
+    u[kind == 1] = np.inf
+    l[kind == 3] = u[kind == 3] = c0[kind == 3]
+    lb, ub = np.full(n, -1.0), np.full(n, 1.0)
+    if rng.random() < 0.3:
+        lb[0] = ub[0] = x0[0]
+    return QPProblem(M @ M.T + 0.1 * np.eye(n), 4.0 * rng.standard_normal(n), C, l, u, lb, ub)
+
+
+def _exact_kkt_solution(p: QPProblem, x_guess: np.ndarray, tol: float = 1e-9
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The optimum from the KKT equations on the active set of ``x_guess``, certified.
+
+    With the active rows ``A_act x = b_act`` of ``v = [C; I] x`` (equalities, and bounds met
+    within ``tol``), solves ``[[H, A_act^T], [A_act, 0]] [x; y] = [-g; b_act]`` exactly (no
+    QP solver): ``y`` are the duals in this module's convention. Returns (x, z, z_box,
+    side), side = -1 / +1 / 0 for a lower-active / upper-active / inactive entry of v, after
+    checking that x is feasible and every y has its side's sign (then, H being positive
+    definite, x is the optimum and, with linearly independent active rows, y is unique);
+    None when the active rows are dependent (the duals are not unique).
+    """
+    assert p.C is not None and p.l is not None and p.u is not None
+    assert p.lb is not None and p.ub is not None
+    n, m = p.H.shape[0], p.C.shape[0]
+    V = np.vstack([p.C, np.eye(n)])
+    lo, hi = np.r_[p.l, p.lb], np.r_[p.u, p.ub]
+    v = V @ x_guess
+    at_lo, at_hi = np.abs(v - lo) <= tol, np.abs(v - hi) <= tol
+    act = at_lo | at_hi
+    A, b = V[act], np.where(at_lo, lo, hi)[act]
+    if np.linalg.matrix_rank(A) < A.shape[0]:
+        return None
+    k = A.shape[0]
+    K = np.block([[p.H, A.T], [A, np.zeros((k, k))]])
+    sol = np.linalg.solve(K, np.r_[-p.g, b])
+    x, y = sol[:n], np.zeros(m + n)
+    y[act] = sol[n:]
+    side = np.where(at_lo & ~at_hi, -1, np.where(at_hi & ~at_lo, 1, 0))
+    side[act & at_lo & at_hi] = 0  # equality: free sign
+    assert np.all(V @ x >= lo - 1e-9) and np.all(V @ x <= hi + 1e-9)
+    assert np.all(y[side == -1] <= 1e-12) and np.all(y[side == 1] >= -1e-12)
+    np.testing.assert_allclose(p.H @ x + p.g + V.T @ y, 0.0, atol=1e-10)
+    side[~act] = 0
+    return x, y[:m], y[m:], np.where(act, side, 2)
+
+
+@pytest.mark.parametrize("solver", ACTIVE_SET)
+def test_random_qps_match_the_exact_kkt_solution_and_proxsuite(solver: str) -> None:
+    """100 seeded random QPs with two-sided, one-sided and equality rows and an active box:
+    x and both duals agree with the exact KKT solve to 1e-9 (1e-7 asked), have the module's
+    signs (z <= 0 at an active lower, >= 0 at an active upper bound, 0 on inactive rows), and
+    agree with proxsuite (to proxsuite's own accuracy at eps_abs = 1e-9: 1e-6)."""
+    rng = np.random.default_rng(20250101)
+    qp = QPSolver(N_JOINTS, 12, solver)
+    prox = QPSolver(N_JOINTS, 12, "proxsuite")
+    seen = {"lower": 0, "upper": 0, "equality": 0, "box": 0, "unique": 0, "proxsuite": 0}
+    for k in range(100):
+        p = _random_general_qp(rng)
+        sol = qp.solve(p)
+        assert sol.status == "solved", k
+        _assert_kkt_small(p, sol, 1e-9)
+        ref = _exact_kkt_solution(p, sol.x)
+        if ref is None:
+            continue
+        x_ref, z_ref, zb_ref, side = ref
+        seen["unique"] += 1
+        scale = 1.0 + np.abs(np.r_[z_ref, zb_ref]).max()
+        np.testing.assert_allclose(sol.x, x_ref, atol=1e-9, err_msg=f"problem {k}")
+        np.testing.assert_allclose(sol.z, z_ref, atol=1e-9 * scale, err_msg=f"problem {k}")
+        np.testing.assert_allclose(sol.z_box, zb_ref, atol=1e-9 * scale, err_msg=f"problem {k}")
+        y = np.r_[sol.z, sol.z_box]
+        assert np.all(y[side == -1] <= 1e-12) and np.all(y[side == 1] >= -1e-12), k
+        np.testing.assert_array_equal(y[side == 2], 0.0)  # inactive: exactly 0
+        m = sol.z.shape[0]
+        seen["lower"] += int(np.any(side[:m] == -1))
+        seen["upper"] += int(np.any(side[:m] == 1))
+        seen["equality"] += int(np.any(np.asarray(p.l) == np.asarray(p.u)))
+        seen["box"] += int(np.any(side[m:] != 2))
+        ps = prox.solve(p)
+        if ps.status != "solved":  # proxsuite 0.8.0 calls problem 6 "infeasible"; OSQP solves it
+            continue
+        seen["proxsuite"] += 1
+        np.testing.assert_allclose(sol.x, ps.x, atol=1e-7, err_msg=f"problem {k}")
+        np.testing.assert_allclose(y, np.r_[ps.z, ps.z_box], atol=1e-6 * scale,
+                                   err_msg=f"problem {k}")  # fmt: skip
+    # Every kind of active constraint is exercised, with unique duals nearly always.
+    assert seen["unique"] >= 90 and seen["proxsuite"] >= seen["unique"] - 2, seen
+    assert min(seen["lower"], seen["upper"], seen["equality"], seen["box"]) >= 20, seen
+
+
+def test_daqp_and_quadprog_agree_on_the_cbf_sequence(cbf_problems) -> None:
+    """Two independent exact methods (warm-started DAQP, cold quadprog): same x and duals."""
+    a = QPSolver(N_JOINTS, N_SENSORS, "daqp")
+    b = QPSolver(N_JOINTS, N_SENSORS, "quadprog")
+    for k, (p, _) in enumerate(cbf_problems):
+        sa, sb = a.solve(p), b.solve(p)
+        assert sa.status == sb.status == "solved", k
+        np.testing.assert_allclose(sa.x, sb.x, atol=1e-10, err_msg=f"problem {k}")
+        np.testing.assert_allclose(sa.z, sb.z, atol=1e-9, err_msg=f"problem {k}")
+        np.testing.assert_allclose(sa.z_box, sb.z_box, atol=1e-9, err_msg=f"problem {k}")
+
+
+@pytest.mark.parametrize("solver", ACTIVE_SET)
+def test_contradictory_rows_are_certified_infeasible(solver: str) -> None:
+    """x_1 + x_2 >= 1 and x_1 + x_2 <= 0 on two rows (each row alone is fine, so the layer's
+    l <= u check passes them on): the backend certifies it, never "solved"."""
+    problem = QPProblem(np.eye(2), np.zeros(2), np.array([[1.0, 1.0], [1.0, 1.0]]),
+                        np.array([1.0, -np.inf]), np.array([np.inf, 0.0]), None, None)  # fmt: skip
+    qp = QPSolver(2, 2, solver)
+    sol = qp.solve(problem)
+    assert sol.status == "infeasible"
+    assert sol.attempts == 1 and np.all(np.isfinite(sol.x))
+    # Warm (DAQP) from a feasible QP: the warm attempt and the cold retry both certify it.
+    feasible = problem._replace(u=np.array([np.inf, 5.0]))
+    assert qp.solve(feasible).status == "solved"
+    again = qp.solve(problem)
+    assert again.status == "infeasible"
+    assert again.attempts == (2 if solver == "daqp" else 1)
+    assert qp.solve(feasible).status == "solved"  # and recovers
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("field", ["H", "g", "C", "l", "ub"])
+def test_non_finite_data_is_failed(solver: str, field: str) -> None:
+    """NaN (or inf in H, g, C) anywhere is "failed", decided before the backend is called."""
+    base = QPProblem(np.eye(2), np.zeros(2), np.array([[1.0, 1.0]]), np.array([1.0]),
+                     np.array([np.inf]), np.full(2, -1.0), np.full(2, 1.0))  # fmt: skip
+    bad = np.array(getattr(base, field), dtype=float)
+    bad.flat[0] = np.inf if field in ("H", "C") else np.nan
+    qp = QPSolver(2, 1, solver)
+    sol = qp.solve(base._replace(**{field: bad}))
+    assert sol.status == "failed" and sol.attempts == 0
+    assert np.all(np.isfinite(sol.x)) and np.all(np.isfinite(sol.z))
+    assert qp.solve(base).status == "solved"
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_unsatisfiable_infinite_bound_is_infeasible(solver: str) -> None:
+    """A row with l = +inf (or a variable with ub = -inf) is infeasible, not an error."""
+    row = QPProblem(np.eye(2), np.zeros(2), np.array([[1.0, 0.0]]), np.array([np.inf]),
+                    np.array([np.inf]), None, None)  # fmt: skip
+    box = QPProblem(np.eye(2), np.zeros(2), None, None, None, np.full(2, -np.inf),
+                    np.array([-np.inf, 1.0]))  # fmt: skip
+    assert QPSolver(2, 1, solver).solve(row).status == "infeasible"
+    assert QPSolver(2, 0, solver).solve(box).status == "infeasible"
+
+
+def test_quadprog_needs_a_positive_definite_hessian() -> None:
+    """A singular H is "failed" for quadprog (its ValueError), solved by DAQP (proximal
+    iterations); an indefinite H is "failed" for both."""
+    problem = QPProblem(np.diag([1.0, 0.0]), np.array([1.0, 1.0]), np.array([[0.0, 1.0]]),
+                        np.array([0.0]), np.array([np.inf]), np.full(2, -5.0), np.full(2, 5.0))
+    sol = QPSolver(2, 1, "quadprog").solve(problem)
+    assert sol.status == "failed" and sol.attempts == 1
+    sol = QPSolver(2, 1, "daqp").solve(problem)  # x = (-1, 0), z = -1
+    assert sol.status == "solved"
+    np.testing.assert_allclose(sol.x, [-1.0, 0.0], atol=1e-8)
+    np.testing.assert_allclose(sol.z, [-1.0], atol=1e-8)
+    indefinite = problem._replace(H=np.diag([1.0, -1.0]))
+    for solver in ACTIVE_SET:
+        assert QPSolver(2, 1, solver).solve(indefinite).status == "failed", solver
+
+
+def test_quadprog_over_budget_is_max_iter_with_its_true_count() -> None:
+    """quadprog cannot be stopped: a QP needing 9 main iterations with a budget of 4 is
+    "max_iter" (never "solved"), reported with the 9 it took, in one (cold) attempt."""
+    hard = _cbf_sequence(seed=3, count=1)[0]
+    needs = QPSolver(N_JOINTS, N_SENSORS, "quadprog").solve(hard)
+    assert needs.status == "solved" and needs.iterations > 4
+    assert needs.inner_iterations >= needs.iterations  # + the rows dropped on the way
+    qp = QPSolver(N_JOINTS, N_SENSORS, "quadprog", max_iter=4)
+    assert qp.solve(_EASY).status == "solved"
+    sol = qp.solve(hard)
+    assert sol.status == "max_iter"
+    assert sol.iterations == needs.iterations and sol.attempts == 1
+    assert qp.cold_retries == 0
+    np.testing.assert_allclose(sol.x, needs.x, atol=0)
+
+
+def test_daqp_warm_start_reuses_the_working_set(cbf_problems) -> None:
+    """Warm-started DAQP re-solves the slowly changing sequence in a fraction of the cold
+    iterations, with the same answers; its settings are the layer's budget and tolerance."""
+    warm = QPSolver(N_JOINTS, N_SENSORS, "daqp", eps_abs=1e-9, max_iter=321)
+    cold = QPSolver(N_JOINTS, N_SENSORS, "daqp", warm_start=False)
+    n_warm, n_cold = [], []
+    for p, _ in cbf_problems:
+        sw, sc = warm.solve(p), cold.solve(p)
+        assert sw.status == sc.status == "solved"
+        np.testing.assert_allclose(sw.x, sc.x, atol=1e-10)
+        n_warm.append(sw.iterations)
+        n_cold.append(sc.iterations)
+    assert np.mean(n_warm) < 0.3 * np.mean(n_cold), (np.mean(n_warm), np.mean(n_cold))
+    assert warm.cold_retries == 0
+    settings = warm._backend._model.settings  # type: ignore[attr-defined]
+    assert settings["iter_limit"] == 321 and settings["primal_tol"] == 1e-9
+    model = warm._backend._model  # type: ignore[attr-defined]
+    p = cbf_problems[0][0]
+    assert p.C is not None
+    warm.solve(p)
+    assert warm._backend._model is model  # type: ignore[attr-defined]  # same workspace
+    l = np.array(p.l)
+    l[0] = (p.C @ warm.solve(p).x)[0]
+    u = np.full(N_SENSORS, np.inf)
+    u[0] = l[0]
+    eq = p._replace(l=l, u=u)  # row 0 becomes an equality: a new setup
+    sol = warm.solve(eq)
+    assert sol.status == "solved" and warm._backend._model is not model  # type: ignore[attr-defined]
+    np.testing.assert_allclose(sol.x, _reference(eq)[0], atol=1e-9)
+
+
+@pytest.mark.parametrize("solver", ACTIVE_SET)
+def test_active_set_backends_solve_the_degenerate_two_wall_qps(solver: str) -> None:
+    """The nearly degenerate two-wall CBF-QPs (where proxsuite runs long Newton loops) are
+    solved exactly within the default budget: KKT residuals at rounding level, x as
+    proxsuite's with a large budget."""
+    rng = np.random.default_rng(0)
+    qp = QPSolver(N_JOINTS, N_SENSORS, solver)
+    for k in range(20):
+        p = _two_walls(rng)
+        sol = qp.solve(p)
+        assert sol.status == "solved", k
+        assert sol.iterations <= 100
+        _assert_kkt_small(p, sol, 1e-9)
+        ref = QPSolver(N_JOINTS, N_SENSORS, "proxsuite", max_iter=10000).solve(p)
+        np.testing.assert_allclose(sol.x, ref.x, atol=1e-6, err_msg=f"problem {k}")

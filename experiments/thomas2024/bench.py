@@ -21,7 +21,7 @@ from experiments.thomas2024.run import build, run
 from repro.bench import timing_row
 from repro.runs.trace import load_run
 
-QPS = ("proxsuite", "osqp")
+QPS = C.QP_SOLVERS  # every qp_solver choice
 
 
 def _states(results_dir: Path, case: str, cfg: C.Thomas2024Config, tmp: Path) -> np.ndarray:

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from repro.config import param
+from repro.control.qp import SOLVERS as QP_SOLVERS  # proxsuite, osqp, daqp, quadprog
 
 CASES = ("case1", "case2", "case3", "parallel")
 RING_MODELS = ("coarse", "beta1", "exact")
@@ -70,8 +71,10 @@ class Thomas2024Config:
                                    help="std of ToF noise")  # ours: VL53L-class ToF, a few mm
     max_range: float = param(1.0, unit="m", range=(0.05, 10.0),
                              help="reading with no detection (Sec. V: 1 m)")
-    qp_solver: str = param("proxsuite", choices=("proxsuite", "osqp"),
-                           help="QP solver (the paper: ProxQP)")
+    qp_solver: str = param("proxsuite", choices=QP_SOLVERS,
+                           help="QP solver (the paper: ProxQP = proxsuite); osqp = ADMM, "
+                                "daqp = dual active set (warm-started), quadprog = "
+                                "Goldfarb-Idnani dual active set (cold, H > 0)")
     qp_max_iter: int = param(200, range=(1, 100000),
                              help="iteration budget per QP solve")  # ours: bounds an infeasible solve to ~2 ms
     seed: int = param(0, range=SEED_RANGE, help="seed of the sensor noise (32-bit)")

@@ -115,7 +115,8 @@ class CBFQPResult:
     def iterations(self) -> int:
         """Iterations of the one solve whose solution is u (:attr:`command_solution`; the
         hard QP's when "failed"), at most that solve's ``max_iter``: outer ALM iterations
-        for proxsuite, ADMM iterations for OSQP (see :mod:`repro.control.qp`)."""
+        for proxsuite, ADMM iterations for OSQP, active-set iterations for DAQP and quadprog
+        (see :mod:`repro.control.qp`)."""
         sol = self.command_solution
         return (self.solution if sol is None else sol).iterations
 
@@ -127,7 +128,7 @@ class CBFQPResult:
 
 
 #: Default iteration budgets of the hard QP per solver.
-DEFAULT_MAX_ITER = {"proxsuite": 200, "osqp": 10000}
+DEFAULT_MAX_ITER = {"proxsuite": 200, "osqp": 10000, "daqp": 200, "quadprog": 200}
 
 
 class CBFQPController:
@@ -151,11 +152,12 @@ class CBFQPController:
 
     Args:
         n: joints; m: CBF rows.
-        solver: "proxsuite" or "osqp".
+        solver: one of :data:`repro.control.qp.SOLVERS`: "proxsuite" (the paper's),
+            "osqp", "daqp" or "quadprog".
         max_iter: iteration budget of each hard solve (bounds the time an infeasible QP
             costs); None = the solver's default: 200 outer iterations (and at most 200
             Newton steps in each) for proxsuite, 10000 ADMM iterations for OSQP (its count
-            is of much cheaper steps).
+            is of much cheaper steps), 200 active-set iterations for DAQP and quadprog.
         slack_weight: rho. # ours: 1e4 makes a 1 mm/s violation cost like 0.1 rad/s of task error
     """
 

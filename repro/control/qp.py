@@ -1,4 +1,5 @@
-r"""Small dense QP layer for the CBF-QP controllers (proxsuite and OSQP backends).
+r"""Small dense QP layer for the CBF-QP controllers (proxsuite, OSQP, DAQP and quadprog
+backends).
 
 Problem solved, with :math:`x \in \mathbb{R}^n` and :math:`m` inequality rows:
 
@@ -11,8 +12,16 @@ Bounds may be :math:`\pm\infty` (a one-sided row has ``l = -inf`` or ``u = +inf`
 CBF-QP of Thomas & Chaumette (2024), eq. (10), :math:`a_k^\top u \ge b_k`, is the case
 ``C = [a_k^T]``, ``l = b``, ``u = +inf``.
 
-Dual sign convention (proxsuite's; OSQP's ``y`` has the same sign, checked in
-``tests/test_qp.py``). The solution carries ``z`` (one per row of ``C``) and ``z_box``
+Backends (:data:`SOLVERS`): ``"proxsuite"`` (ProxQP, the paper's solver: proximal augmented
+Lagrangian, the default), ``"osqp"`` (ADMM, polished), ``"daqp"`` (dual active set, exact up
+to rounding, warm-started from the previous working set) and ``"quadprog"`` (Goldfarb-Idnani
+dual active set, exact up to rounding, always cold; needs ``H`` positive definite; GPL-2.0+,
+so an optional dev dependency, imported only when chosen).
+
+Dual sign convention (proxsuite's; OSQP's ``y`` and DAQP's ``lam`` have the same sign;
+quadprog's one-sided multipliers ``lambda >= 0`` are recombined into it, see
+:class:`_QuadprogBackend`; all four checked in ``tests/test_qp.py`` against closed forms and
+against each other). The solution carries ``z`` (one per row of ``C``) and ``z_box``
 (one per variable) such that
 
 .. math::
@@ -26,15 +35,19 @@ the Lagrangian :math:`L = \tfrac12 x^\top H x + g^\top x - \sum_k \kappa_k (a_k^
 :math:`\kappa_k \ge 0`; hence :math:`\kappa = \max(-z, 0)`, see :func:`lower_multipliers`.
 
 Statuses: ``"solved"`` (converged *and* the KKT residuals recomputed here are small),
-``"infeasible"`` (primal or dual infeasibility certified, or ``l > u``), ``"max_iter"``
+``"infeasible"`` (primal or dual infeasibility certified, or ``l > u``, ``l = +inf``,
+``u = -inf``), ``"max_iter"``
 (iteration budget spent), ``"failed"`` (anything else, including a backend that claims
-success with large KKT residuals, and non-finite data). OSQP certifies the infeasible
-CBF-QPs of two opposite sensors within ~50 iterations; proxsuite 0.8.0 did not certify any
-in our tests and runs to ``max_iter`` outer iterations (about 20-45 ms for ``max_iter=1000``
-with n = 7, m = 36, i.e. more than one 30 Hz period: lower ``max_iter`` if that matters).
+success with large KKT residuals, and non-finite data). DAQP (exit flag -1) and quadprog
+(its "constraints are inconsistent" error) certify the infeasible CBF-QPs of two opposite
+sensors in a few active-set iterations, OSQP within ~50 iterations; proxsuite 0.8.0 did not
+certify any in our tests and runs to ``max_iter`` outer iterations (about 20-45 ms for
+``max_iter=1000`` with n = 7, m = 36, i.e. more than one 30 Hz period: lower ``max_iter``
+if that matters).
 
 What counts as an iteration, and the budget ``max_iter`` (per attempt, see
-:meth:`QPSolver.solve`); a solve never reports ``"solved"`` with more than ``max_iter``:
+:meth:`QPSolver.solve`); a solve never reports ``"solved"`` with more than ``max_iter``
+(and, but for quadprog's ``"max_iter"``, never reports more than ``max_iter``):
 
 - proxsuite: one *outer* (proximal augmented-Lagrangian) iteration, ``info.iter_ext``,
   capped by its ``settings.max_iter``. Each outer iteration runs an inner semi-smooth
@@ -46,6 +59,15 @@ What counts as an iteration, and the budget ``max_iter`` (per attempt, see
 - OSQP: one ADMM iteration (``info.iter``; both stages of ``_OsqpBackend``, so at most
   ``max_iter`` in all; the polishing solve is not counted). ``inner_iterations`` equals
   ``iterations``.
+- DAQP: one active-set iteration (``info["iterations"]``): one row added to or removed from
+  the working set, an update of its LDL' factors; capped by its ``iter_limit``. A
+  warm-started solve of a slowly changing sequence takes 1-2 (cold: ~10-25 for n = 7,
+  m = 36). ``inner_iterations`` equals ``iterations``.
+- quadprog: one main Goldfarb-Idnani iteration (``iter[0]``): pick the most violated row and
+  step until it is active (the final check that finds none counts too, so an unconstrained
+  QP takes 1). quadprog has no iteration limit: a solve that took more than ``max_iter`` is
+  ``"max_iter"``, reported with its true count. ``inner_iterations`` adds the rows dropped on
+  the way (``iter[1]``): the factor updates.
 :meth:`QPSolver.solve` never raises for these: the controller applies its fallback. When
 the status is not ``"solved"``, ``x``, ``z`` and ``z_box`` are the backend's last iterate
 with non-finite entries replaced by 0; they must not be applied as a command.
@@ -56,13 +78,13 @@ Backends are imported lazily, so importing this module costs only NumPy.
 from __future__ import annotations
 
 import time
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal, NamedTuple, Protocol
 
 import numpy as np
 
 from repro.errors import ConfigError, ReproError, UnknownChoiceError
 
-SOLVERS: tuple[str, ...] = ("proxsuite", "osqp")
+SOLVERS: tuple[str, ...] = ("proxsuite", "osqp", "daqp", "quadprog")
 """Valid values of ``QPSolver(solver=...)``."""
 
 QPStatus = Literal["solved", "infeasible", "max_iter", "failed"]
@@ -111,15 +133,17 @@ class QPSolution(NamedTuple):
         z_box: (n,) duals of the box bounds.
         status: one of :data:`STATUSES`.
         iterations: iterations of the one backend attempt that produced ``x`` (the cold
-            retry when there was one), at most ``max_iter``; proxsuite: outer ALM
-            iterations, OSQP: ADMM iterations (see the module docstring).
+            retry when there was one), at most ``max_iter`` (quadprog: also more, then with
+            status ``"max_iter"``); proxsuite: outer ALM iterations, OSQP: ADMM iterations,
+            DAQP and quadprog: active-set iterations (see the module docstring).
         solve_time_s: wall time of the whole :meth:`QPSolver.solve` call [s], including
             data transfer to the backend, both attempts and the KKT check.
         primal_residual: max bound violation of ``C x`` and ``x``, recomputed here on the
             unscaled problem (infinity norm).
         dual_residual: infinity norm of ``H x + g + C^T z + z_box``, recomputed here.
         inner_iterations: proxsuite: Newton steps of that attempt (``info.iter``), at most
-            ``max_iter * (max_iter_in + 1)``; OSQP: equal to ``iterations``.
+            ``max_iter * (max_iter_in + 1)``; quadprog: ``iterations`` plus the rows dropped
+            from the active set; OSQP, DAQP: equal to ``iterations``.
         total_iterations: ``iterations`` summed over the attempts of this call (warm
             attempt plus cold retry): the work of the call, at most ``2 * max_iter``.
         attempts: backend attempts of this call: 0 (data rejected before the backend),
@@ -165,8 +189,8 @@ class _RawResult(NamedTuple):
     z: np.ndarray
     z_box: np.ndarray
     status: QPStatus
-    iterations: int  # outer (proxsuite) or ADMM (OSQP) iterations, <= max_iter
-    inner_iterations: int  # proxsuite: Newton steps; OSQP: = iterations
+    iterations: int  # proxsuite: outer; OSQP: ADMM; DAQP, quadprog: active-set iterations
+    inner_iterations: int  # proxsuite: Newton steps; quadprog: + dropped rows; else = iterations
 
 
 def _vec(v: np.ndarray | None, size: int, fill: float, name: str) -> np.ndarray:
@@ -563,9 +587,203 @@ class _OsqpBackend:
         )
 
 
-_BACKENDS: dict[str, type[_ProxsuiteBackend] | type[_OsqpBackend]] = {
+#: DAQP exit flags (``include/constants.h`` of DAQP 0.11) and what they mean here.
+_DAQP_STATUS: dict[int, QPStatus] = {
+    1: "solved",  # EXIT_OPTIMAL
+    -1: "infeasible",  # EXIT_INFEASIBLE: primal infeasibility certified
+    -3: "infeasible",  # EXIT_UNBOUNDED: dual infeasible (only with a singular H)
+    -4: "max_iter",  # EXIT_ITERLIMIT
+    -7: "max_iter",  # EXIT_TIMELIMIT (no time limit is set)
+}  # 2 SOFT_OPTIMAL (no soft rows here), -2 CYCLE, -5 NONCONVEX, -6 OVERDETERMINED: "failed"
+
+#: DAQP's ``sense`` value for an equality row: active and immutable (1 | 4).
+_DAQP_EQUALITY = 5
+
+
+class _DaqpBackend:
+    r"""DAQP 0.11 (Arnström, Bemporad & Axehill 2022: a dual active-set method) through its
+    reusable ``daqp.Model`` workspace.
+
+    DAQP solves :math:`\min \tfrac12 x^\top H x + f^\top x` s.t.
+    :math:`b_{lower} \le [I; A] x \le b_{upper}`, the first n bounds being simple bounds on
+    ``x``; it is given ``A = C``, ``b_upper = [ub; u]``, ``b_lower = [lb; l]`` (``+-inf``
+    passed as such, checked in the tests). Its multipliers ``lam = [lam_box;
+    lam_rows]`` satisfy :math:`H x + f + [I; A]^\top \lambda = 0` with :math:`\lambda \le 0`
+    at an active lower and :math:`\ge 0` at an active upper bound, i.e. this module's
+    convention: ``z_box = lam[:n]``, ``z = lam[n:]``, no sign change (checked in
+    ``tests/test_qp.py`` against the closed forms and against proxsuite).
+
+    Equality rows (``l == u``, and ``lb == ub``) get DAQP's ``sense`` 5 (active, immutable:
+    a free-sign multiplier). Warm start: the workspace keeps the working set of the previous
+    solve and ``update`` changes the data only, so a slowly changing sequence is re-solved in
+    one or two iterations; a change of which rows are equalities is a new setup (cold).
+    ``eps_abs`` is DAQP's ``primal_tol`` (a row counts as violated beyond it), ``max_iter``
+    its ``iter_limit``. A singular ``H`` is regularised by DAQP's proximal-point iterations
+    (its default ``eps_prox < 0``: automatic).
+    """
+
+    def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool,
+                 max_iter_in: int) -> None:
+        del max_iter_in  # one loop: each iteration adds or removes one row of the working set
+        import daqp  # lazy
+
+        self._daqp = daqp
+        self.n, self.m = n, m
+        self.eps_abs, self.max_iter, self.warm_start = eps_abs, max_iter, warm_start
+        self._model: Any = None
+        self._eq: np.ndarray | None = None  # equality mask [box; rows] of the current setup
+
+    @property
+    def is_warm(self) -> bool:
+        return self.warm_start and self._model is not None
+
+    def reset(self) -> None:
+        self._model = None
+        self._eq = None
+
+    def solve(self, d: _Dense) -> _RawResult:
+        n, m = self.n, self.m
+        # The Model keeps pointers to what it is given: only arrays of this call (d.H is
+        # already one, d.g and d.C may be the caller's).
+        bupper = np.concatenate([d.ub, d.u])
+        blower = np.concatenate([d.lb, d.l])
+        f, A = d.g.copy(), np.array(d.C, dtype=float, order="C")
+        eq = np.isfinite(blower) & (blower == bupper)
+        if (self._model is None or self._eq is None or not self.warm_start
+                or not np.array_equal(eq, self._eq)):
+            model = self._daqp.Model()
+            sense = np.where(eq, _DAQP_EQUALITY, 0).astype(np.intc)
+            flag, _ = model.setup(d.H, f, A, bupper, blower, sense)
+            if flag < 0:  # setup rejected the data (e.g. a non-convex H)
+                self.reset()
+                return _RawResult(np.zeros(n), np.zeros(m), np.zeros(n), "failed", 0, 0)
+            model.settings = {"primal_tol": self.eps_abs, "iter_limit": self.max_iter}
+            self._model, self._eq = model, eq
+        elif self._model.update(H=d.H, f=f, A=A, bupper=bupper, blower=blower) < 0:
+            self.reset()
+            return _RawResult(np.zeros(n), np.zeros(m), np.zeros(n), "failed", 0, 0)
+        x, _, exitflag, info = self._model.solve()
+        status = _DAQP_STATUS.get(int(exitflag), "failed")
+        lam = np.asarray(info["lam"], dtype=float).reshape(-1)
+        iterations = int(info["iterations"])  # equals iter_limit on EXIT_ITERLIMIT
+        return _RawResult(
+            x=_finite_or_zero(x, n),
+            z=_finite_or_zero(lam[n:], m),
+            z_box=_finite_or_zero(lam[:n], n),
+            status=status,
+            iterations=iterations,
+            inner_iterations=iterations,
+        )
+
+
+class _QuadprogBackend:
+    r"""quadprog 0.1 (Goldfarb & Idnani 1983, Turlach's QuadProg): a dual active-set method,
+    exact up to rounding, with no tolerance, no iteration limit and no warm start.
+
+    quadprog solves :math:`\min \tfrac12 x^\top G x - a^\top x` s.t.
+    :math:`C_q^\top x \ge b_q`, the first ``meq`` columns as equalities, and returns
+    multipliers :math:`\lambda` with :math:`G x - a = C_q \lambda`, :math:`\lambda \ge 0` on
+    the inequalities (free sign on the equalities). It is given ``G = H``, ``a = -g`` and
+    one-sided columns, infinite bounds dropped: equality rows ``c_i^T x = l_i`` (``l == u``,
+    and ``lb == ub``) first, then ``c_i^T x >= l_i`` for each finite lower and
+    ``-c_i^T x >= -u_i`` for each finite upper bound (the same with unit vectors for the box).
+    Stationarity :math:`H x + g - C_q \lambda = 0` then gives this module's duals:
+
+    .. math::
+
+        z_i = \lambda^{upper}_i - \lambda^{lower}_i, \qquad z_i = -\lambda^{eq}_i,
+
+    (and ``z_box`` alike), so ``z <= 0`` at an active lower bound and ``z >= 0`` at an active
+    upper bound (checked in ``tests/test_qp.py``).
+
+    ``H`` must be positive definite (quadprog starts from a Cholesky factor): otherwise
+    quadprog raises ``ValueError("matrix G is not positive definite")``, reported as
+    ``"failed"`` (the CBF-QPs have ``H = J^T J + mu I``, ``mu > 0``). Its ``ValueError(
+    "constraints are inconsistent, no solution")`` certifies infeasibility: ``"infeasible"``;
+    either error carries no iterate: ``x = 0``, iterations 0. ``eps_abs`` is not used.
+    quadprog cannot be stopped: ``max_iter`` is applied to its count afterwards (a solve that
+    needed more main iterations is ``"max_iter"``, with its true count). ``warm_start`` is
+    ignored (every solve is cold, :attr:`is_warm` is always False).
+    """
+
+    def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool,
+                 max_iter_in: int) -> None:
+        del eps_abs, warm_start, max_iter_in  # see the class docstring
+        import quadprog  # lazy
+
+        self._solve_qp = quadprog.solve_qp
+        self.n, self.m, self.max_iter = n, m, max_iter
+        self._eye = np.eye(n)
+
+    @property
+    def is_warm(self) -> bool:
+        return False
+
+    def reset(self) -> None:
+        pass  # no state between solves
+
+    def solve(self, d: _Dense) -> _RawResult:
+        n, m = self.n, self.m
+        lo = np.concatenate([d.l, d.lb])  # bounds of v = [C; I] x; QPSolver.solve has
+        hi = np.concatenate([d.u, d.ub])  # rejected lo > hi, lo = +inf and hi = -inf
+        V = np.vstack([d.C, self._eye])  # (m + n, n)
+        eq = np.isfinite(lo) & (lo == hi)
+        low = np.isfinite(lo) & ~eq
+        up = np.isfinite(hi) & ~eq
+        Cq = np.vstack([V[eq], V[low], -V[up]]).T  # columns: equalities first
+        bq = np.concatenate([lo[eq], lo[low], -hi[up]])
+        k_eq, k_low = int(eq.sum()), int(low.sum())
+        try:
+            if bq.size:
+                x, _, _, iters, lam, _ = self._solve_qp(d.H, -d.g, Cq, bq, k_eq)
+            else:  # quadprog cannot take an empty C
+                x, _, _, iters, lam, _ = self._solve_qp(d.H, -d.g)
+                lam = np.zeros(0)
+        except ValueError as err:
+            status: QPStatus = "infeasible" if "inconsistent" in str(err) else "failed"
+            return _RawResult(np.zeros(n), np.zeros(m), np.zeros(n), status, 0, 0)
+        lam = np.asarray(lam, dtype=float)
+        y = np.zeros(m + n)  # [z; z_box]
+        y[eq] = -lam[:k_eq]
+        y[low] -= lam[k_eq:k_eq + k_low]
+        y[up] += lam[k_eq + k_low:]
+        main, dropped = int(iters[0]), int(iters[1])
+        status = "solved" if main <= self.max_iter else "max_iter"
+        return _RawResult(
+            x=_finite_or_zero(x, n),
+            z=_finite_or_zero(y[:m], m),
+            z_box=_finite_or_zero(y[m:], n),
+            status=status,
+            iterations=main,
+            inner_iterations=main + dropped,
+        )
+
+
+class _Backend(Protocol):
+    """What :class:`QPSolver` needs of a backend."""
+
+    def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool,
+                 max_iter_in: int) -> None: ...
+
+    @property
+    def is_warm(self) -> bool:
+        """The next :meth:`solve` starts from the previous one's state."""
+        ...
+
+    def reset(self) -> None:
+        """Forget the warm start."""
+        ...
+
+    def solve(self, d: _Dense) -> _RawResult:
+        """One attempt on ``d``; never raises for infeasible or unsolvable data."""
+        ...
+
+
+_BACKENDS: dict[str, type[_Backend]] = {
     "proxsuite": _ProxsuiteBackend,
     "osqp": _OsqpBackend,
+    "daqp": _DaqpBackend,
+    "quadprog": _QuadprogBackend,
 }
 
 
@@ -578,13 +796,16 @@ class QPSolver:
         solver: one of :data:`SOLVERS`.
         eps_abs: absolute tolerance handed to the backend (``eps_rel`` is 0).
         max_iter: iteration budget per attempt (proxsuite: outer ALM iterations; OSQP: ADMM
-            iterations, see the module docstring); bounds the time spent on an infeasible
-            problem. An attempt that runs out is ``"max_iter"``, never ``"solved"``.
+            iterations; DAQP, quadprog: active-set iterations, see the module docstring);
+            bounds the time spent on an infeasible problem (not for quadprog, which cannot
+            be stopped: its count is checked afterwards). An attempt that runs out is
+            ``"max_iter"``, never ``"solved"``.
         max_iter_in: proxsuite only: Newton steps per outer iteration; None = ``max_iter``.
             Together they bound the work of one attempt to ``max_iter * (max_iter_in + 1)``
             Newton steps.
-        warm_start: start each solve from the previous solution. The warm start is
-            forgotten by :meth:`reset` and after any solve whose status is not ``"solved"``.
+        warm_start: start each solve from the previous solution (DAQP: from its working
+            set; ignored by quadprog, always cold). The warm start is forgotten by
+            :meth:`reset` and after any solve whose status is not ``"solved"``.
         kkt_tol: relative tolerance of the check applied to every backend "success"; see
             :meth:`solve`.
 
@@ -662,7 +883,9 @@ class QPSolver:
         attempts = total = 0
         if not np.isfinite(np.concatenate((d.H.ravel(), d.g, d.C.ravel()))).all():
             raw, status, kkt = self._trivial(d, "failed")
-        elif not (d.bounds[:k] <= d.bounds[k:]).all():  # some l > u, or a NaN bound
+        elif (not (d.bounds[:k] <= d.bounds[k:]).all()  # some l > u, or a NaN bound
+              or (d.bounds[:k] == np.inf).any() or (d.bounds[k:] == -np.inf).any()):
+            # (l = +inf or u = -inf: no x satisfies the row; OSQP would raise on it)
             raw, status, kkt = self._trivial(
                 d, "failed" if np.isnan(d.bounds).any() else "infeasible")
         else:
