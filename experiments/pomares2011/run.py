@@ -452,6 +452,7 @@ class _Bones:
         self.t = float("nan")
         self.list: list[tuple[str, Capsule]] = []
         self.caps: dict[str, Capsule] = {}
+        self.poses: dict[str, tuple[Capsule, np.ndarray]] = {}  # its capsule, its pose
 
     def capsules(self, t: float) -> list[tuple[str, Capsule]]:
         """:meth:`repro.sim.human.HumanMotion.capsules` at ``t`` [s], cached."""
@@ -463,7 +464,11 @@ class _Bones:
     def pose(self, name: str) -> Callable[[float], np.ndarray]:
         def pose(t: float) -> np.ndarray:
             self.capsules(t)
-            return np.asarray(self.caps[name].T_world())
+            cap = self.caps[name]
+            seen = self.poses.get(name)
+            if seen is None or seen[0] is not cap:  # a capsule of a new body state
+                seen = self.poses[name] = (cap, np.asarray(cap.T_world()))
+            return seen[1]
         return pose
 
 

@@ -261,6 +261,10 @@ class HumanMotion:
             raise ConfigError(f"T_world_base has shape {self.T_world_base.shape}, expected "
                               "(4, 4)")
         self._side = 1.0 if path.arm == "left" else -1.0  # +y is the person's left
+        #: per radii: (state, capsules) of the last call; a still person's capsules are
+        #: computed once (values identical: the same state gives the same arithmetic)
+        self._capsule_cache: dict[HumanRadii, tuple[tuple[bytes, float, _ArmPose],
+                                                    list[tuple[str, Capsule]]]] = {}
         self._solve_stance()
         p = path
         self._t_walk_in_end = p.t_reach - p.reach_duration
@@ -358,9 +362,13 @@ class HumanMotion:
         ``elbow_l/r``, ``wrist_l/r``, ``fingertip_l/r``, ``hip_l/r``, ``knee_l/r``,
         ``ankle_l/r``.
         """
+        pos, yaw, reach_arm, _ = self._state(t)
+        return self._joints(pos, yaw, reach_arm)
+
+    def _joints(self, pos: np.ndarray, yaw: float, reach_arm: _ArmPose
+                ) -> dict[str, np.ndarray]:
         b = self.body
         H = b.stature
-        pos, yaw, reach_arm, _ = self._state(t)
         z = np.array([0.0, 0.0, 1.0])
         P: dict[str, np.ndarray] = {}
         P["hip"] = np.array([0.0, 0.0, b.hip_height])
@@ -399,7 +407,12 @@ class HumanMotion:
                 controller's own bounding volumes).
         """
         r = self.body.radii if radii is None else radii
-        J = self.joints(t)
+        pos, yaw, reach_arm, _ = self._state(t)
+        key = (np.asarray(pos, dtype=float).tobytes(), float(yaw), reach_arm)
+        cached = self._capsule_cache.get(r)
+        if cached is not None and cached[0] == key:  # standing or holding: the same body
+            return list(cached[1])  # (Capsule is immutable)
+        J = self._joints(pos, yaw, reach_arm)
         out = [("torso", Capsule(J["hip"], J["neck"], r.torso)),
                ("head", Capsule(J["neck"], J["head_top"], r.head))]
         for tag in ("l", "r"):
@@ -411,7 +424,8 @@ class HumanMotion:
                                             r.hand)),
                     (f"thigh_{tag}", Capsule(J[f"hip_{tag}"], J[f"knee_{tag}"], r.thigh)),
                     (f"shank_{tag}", Capsule(J[f"knee_{tag}"], J[f"ankle_{tag}"], r.shank))]
-        return out
+        self._capsule_cache[r] = (key, out)
+        return list(out)
 
     def fingertip(self, t: float) -> np.ndarray:
         """Tip of the reaching hand (end of its hand segment) in the world [m]."""
