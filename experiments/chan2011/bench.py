@@ -53,7 +53,7 @@ def bench(results_dir: Path) -> list[dict[str, object]]:
             for _, row in states.iterrows():
                 q = row[[f"q{i}" for i in range(1, 7)]].to_numpy(float)
                 p_k = row[[f"p{j}_{a}" for j in range(1, 11) for a in "uv"]].to_numpy(float)
-                if not np.all(np.isfinite(p_k)):
+                if not np.isfinite(p_k).all():
                     continue
                 d_k = nmpc.disturbance(p_k, q, setting.T_object_estimate, sc.CONROD_POINTS)
                 if mode == "cold":

@@ -201,7 +201,7 @@ class CBFQPController:
                 ub=np.concatenate([qd_max, np.full(m, np.inf)]),
             )
             rs = self.relaxed.solve(relaxed)
-            if rs.status == "solved" and np.all(np.isfinite(rs.x)):
+            if rs.status == "solved" and np.isfinite(rs.x).all():
                 kappa = lower_multipliers(rs)
                 grad_L0 = float(np.linalg.norm(objective.g - ineq.A.T @ kappa))
                 return CBFQPResult(rs.x[:n], "relaxed", sol.status, kappa, grad_L0,

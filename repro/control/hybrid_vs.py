@@ -78,7 +78,7 @@ def _matrix(name: str, a: np.ndarray, shape: tuple[int | None, int | None]) -> n
     if a.ndim != 2 or any(want is not None and got != want
                           for got, want in zip(a.shape, shape, strict=True)):
         raise ValueError(f"{name} must have shape {shape} (None: any), got {a.shape}")
-    if not np.all(np.isfinite(a)):
+    if not np.isfinite(a).all():
         raise ValueError(f"{name} must be finite; non-finite entries at "
                          f"{np.argwhere(~np.isfinite(a)).tolist()}")
     return a
@@ -88,7 +88,7 @@ def _vector(name: str, a: np.ndarray, n: int) -> np.ndarray:
     a = np.asarray(a, dtype=float).reshape(-1)
     if a.shape != (n,):
         raise ValueError(f"{name} must have {n} entries, got {a.shape[0]}")
-    if not np.all(np.isfinite(a)):
+    if not np.isfinite(a).all():
         raise ValueError(f"{name} must be finite, got {a.tolist()}")
     return a
 
@@ -392,7 +392,7 @@ class HybridVSConfig:
 
     def __post_init__(self) -> None:
         s_star = np.asarray(self.s_star, dtype=float).reshape(-1)
-        if not np.all(np.isfinite(s_star)):
+        if not np.isfinite(s_star).all():
             raise ConfigError(f"s_star must be finite, got {s_star.tolist()}")
         K_v = np.asarray(self.K_v, dtype=float)
         K_v = np.diag(K_v) if K_v.ndim == 1 else K_v

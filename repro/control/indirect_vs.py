@@ -84,7 +84,7 @@ def ibvs_velocity_reference(J: np.ndarray, e: np.ndarray, gain: float,
     e = np.asarray(e, dtype=float).reshape(-1)
     if J.ndim != 2 or J.shape[0] != e.size:
         raise ValueError(f"J {J.shape} and e ({e.size},) do not match")
-    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(e))):
+    if not (np.isfinite(J).all() and np.isfinite(e).all()):
         raise ValueError("J and e must be finite")
     n = J.shape[1]
     JtJ = J.T @ J

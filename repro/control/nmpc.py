@@ -213,7 +213,7 @@ def _vec(a: np.ndarray | Sequence[float], shape: tuple[int, ...], name: str) -> 
     a = np.asarray(a, dtype=float)
     if a.shape != shape:
         raise ConfigError(f"{name} must have shape {shape}, got {a.shape}")
-    if not np.all(np.isfinite(a)):
+    if not np.isfinite(a).all():
         raise ConfigError(f"{name} has non-finite entries: {a}")
     return a
 
@@ -515,10 +515,10 @@ class VisualNMPC:
             float(np.max(np.maximum(qd_lo - x, 0.0))),
             float(np.max(np.maximum(x - qd_hi, 0.0))),
         )
-        if not np.all(np.isfinite(g_val)):
+        if not np.isfinite(g_val).all():
             violation = math.inf
         success = solver_ok and violation <= cfg.feas_tol
-        if np.all(np.isfinite(lam_x)) and np.all(np.isfinite(lam_g)) and solver_ok:
+        if np.isfinite(lam_x).all() and np.isfinite(lam_g).all() and solver_ok:
             self._warm = {"x": x.copy(), "lam_x": lam_x, "lam_g": lam_g,
                           "scale": np.array(scale)}
         return NMPCSolution(

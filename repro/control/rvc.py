@@ -87,7 +87,7 @@ def _pose(name: str, T: np.ndarray) -> np.ndarray:
     T = np.asarray(T, dtype=float)
     if T.shape != (4, 4):
         raise ValueError(f"{name} must be 4x4, got shape {T.shape}")
-    if not np.all(np.isfinite(T)):
+    if not np.isfinite(T).all():
         raise NonFiniteInputError(f"{name} must be finite")
     return T
 
@@ -148,7 +148,7 @@ def rvc_features(intrinsics: Intrinsics, T_rvc_obj: np.ndarray,
     P = np.asarray(points_u_obj, dtype=float)
     if P.ndim != 2 or P.shape[1] != 3:
         raise ValueError(f"points_u_obj must have shape (N, 3), got {P.shape}")
-    if not np.all(np.isfinite(P)):
+    if not np.isfinite(P).all():
         raise NonFiniteInputError("points_u_obj must be finite")
     xy, Z = project_normalized(P, T)  # eqs. (19)-(20)
     if not np.all(Z > 0.0):
@@ -203,7 +203,7 @@ def _error(features: RVCFeatures, uv_star: np.ndarray, intrinsics: Intrinsics) -
     uv_star = np.asarray(uv_star, dtype=float)
     if uv_star.shape != features.xy.shape:
         raise ValueError(f"uv_star must have shape {features.xy.shape}, got {uv_star.shape}")
-    if not np.all(np.isfinite(uv_star)):
+    if not np.isfinite(uv_star).all():
         raise NonFiniteInputError("uv_star (s_u*) must be finite")
     return np.asarray((features.xy - intrinsics.to_normalized(uv_star)).ravel(), dtype=float)
 

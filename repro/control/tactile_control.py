@@ -278,7 +278,7 @@ class TactileController:
         if traj.ndim != 2 or traj.shape[0] < 1 or traj.shape[1] != n:
             raise ConfigError(f"trajectory must have shape (nSteps >= 1, nFingers = {n}), "
                               f"got {traj.shape}")
-        if not np.all(np.isfinite(traj)):
+        if not np.isfinite(traj).all():
             raise ConfigError(f"trajectory must be finite; non-finite entries at "
                               f"{np.argwhere(~np.isfinite(traj)).tolist()}")
         self.config = config
@@ -309,7 +309,7 @@ class TactileController:
         n = self.config.n_fingers
         if a.shape != (n,):
             raise ValueError(f"{name} must have one value per finger ({n}), got {a.shape[0]}")
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise NonFiniteInputError(f"{name} must be finite, got {a.tolist()}")
         return a
 

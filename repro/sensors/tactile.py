@@ -212,7 +212,7 @@ class PadLayout:
 
 def _pose_tuple(T: Any) -> tuple[tuple[float, ...], ...]:
     A = np.asarray(T, dtype=float)
-    if A.shape != (4, 4) or not np.all(np.isfinite(A)):
+    if A.shape != (4, 4) or not np.isfinite(A).all():
         raise ConfigError(f"T_frame_pad must be a finite 4x4 transform, got {A!r}")
     return tuple(tuple(float(v) for v in row) for row in A)
 

@@ -553,7 +553,7 @@ class _Runner:
                 if failed_sensor is not None:
                     u = drive.safe_command()
                 pre = drive.robot.column_prefix
-                if u.shape != (drive.robot.n,) or not np.all(np.isfinite(u)):
+                if u.shape != (drive.robot.n,) or not np.isfinite(u).all():
                     rec.event(t, k, "nan_command", f"{name}: controller command {u.tolist()} "
                               "is not a finite vector of the right size; safe command sent, "
                               "run stopped")

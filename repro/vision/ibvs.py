@@ -43,7 +43,7 @@ SATURATIONS = ("clip", "scale")
 def require_finite(name: str, a: np.ndarray) -> np.ndarray:
     """``a`` as a float array; raises :class:`NonFiniteInputError` naming the bad entries."""
     a = np.asarray(a, dtype=float)
-    if not np.all(np.isfinite(a)):
+    if not np.isfinite(a).all():
         bad = np.argwhere(~np.isfinite(a)).tolist()
         raise NonFiniteInputError(f"{name} must be finite; non-finite entries at {bad}")
     return a

@@ -40,7 +40,7 @@ def _points(points_object: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.n
     uv = np.asarray(uv, dtype=float)
     if P.ndim != 2 or P.shape[1] != 3 or uv.shape != (P.shape[0], 2):
         raise ConfigError(f"need points_object (N, 3) and uv (N, 2), got {P.shape} and {uv.shape}")
-    if not np.all(np.isfinite(P)):
+    if not np.isfinite(P).all():
         raise ConfigError("points_object must be finite")
     return P, uv
 
@@ -105,20 +105,20 @@ def pose_from_points(points_object: np.ndarray, uv: np.ndarray, K: np.ndarray,
         raise UnknownChoiceError("PnP method", method, PNP_METHODS)
     P, uv = _points(points_object, uv)
     K = np.asarray(K, dtype=float)
-    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+    if K.shape != (3, 3) or not np.isfinite(K).all():
         raise ConfigError(f"K must be a finite 3x3 calibration matrix, got shape {K.shape}")
     coplanar = is_coplanar(P)
     if method == "ippe" and not coplanar:
         raise ConfigError("method 'ippe' needs coplanar model points; use 'iterative' or 'auto'")
     n_min = 3 if T_init is not None else 4
-    if P.shape[0] < n_min or not np.all(np.isfinite(uv)) or is_collinear(P) or is_collinear(uv):
+    if P.shape[0] < n_min or not np.isfinite(uv).all() or is_collinear(P) or is_collinear(uv):
         return None
     P = np.ascontiguousarray(P)
     uv = np.ascontiguousarray(uv)
     try:
         if T_init is not None:
             T0 = np.asarray(T_init, dtype=float)
-            if T0.shape != (4, 4) or not np.all(np.isfinite(T0)):
+            if T0.shape != (4, 4) or not np.isfinite(T0).all():
                 raise ConfigError(f"T_init must be a finite 4x4 pose, got shape {T0.shape}")
             rvec0, _ = cv2.Rodrigues(T0[:3, :3])
             ok, rvec, tvec = cv2.solvePnP(P, uv, K, None, rvec0, T0[:3, 3].reshape(3, 1).copy(),
@@ -132,7 +132,7 @@ def pose_from_points(points_object: np.ndarray, uv: np.ndarray, K: np.ndarray,
     if not ok or rvec is None or tvec is None:
         return None
     rvec, tvec = np.asarray(rvec, dtype=float).reshape(3), np.asarray(tvec, dtype=float).reshape(3)
-    if not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
+    if not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
         return None
     T = np.eye(4)
     T[:3, :3] = cv2.Rodrigues(rvec)[0]
@@ -183,6 +183,6 @@ def point_depths(points_object: np.ndarray, uv: np.ndarray, K: np.ndarray,
     if T is None:
         return fallback
     Z = depths_from_pose(P, T)
-    if not np.all(np.isfinite(Z)) or np.any(Z <= 0.0):
+    if not np.isfinite(Z).all() or np.any(Z <= 0.0):
         return fallback
     return Z
