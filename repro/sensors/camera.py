@@ -35,6 +35,10 @@ inflated by Bullet's collision margin (1 mm in every direction, whatever the siz
 boxes and ``p.GEOM_MESH`` shapes render exactly. The dots are therefore flat triangle-fan
 meshes, and :func:`cylinder_visual_shape` gives an exact cylinder for the bodies they sit on.
 
+**Windowed rendering** (opt-in, :attr:`Camera.window`): after a full frame, render only a
+window around each dot's last detection, through :meth:`Intrinsics.crop` (the same rays as
+the full image's pixels there), with full-frame fallbacks; :mod:`repro.sensors.camera_window`.
+
 **Detection is by colour**, so no other body in view may pass a dot's colour mask:
 :func:`check_scene_colors` rejects such a scene when it is built, and :func:`detect_dots`
 only accepts blobs shaped like the image of a disc (area and ellipse fill).
@@ -53,6 +57,14 @@ import pybullet as p
 from scipy.spatial.transform import Rotation
 
 from repro.errors import ConfigError, UnknownChoiceError
+from repro.sensors.camera_window import (
+    DotBlobs,
+    FrameReport,
+    PixelWindow,
+    WindowPlan,
+    WindowPolicy,
+    WindowTracker,
+)
 
 #: Camera modes of :class:`Camera`.
 CAMERA_MODES = ("render", "exact")
@@ -185,6 +197,16 @@ class Intrinsics:
         skew = 0.0 if no_skew else fu / math.tan(beta)
         fv = f * kv if no_skew else f * kv / math.sin(beta)
         return cls(width, height, fu, fv, float(u0), float(v0), near, far, skew)
+
+    def crop(self, window: PixelWindow) -> Intrinsics:
+        """Intrinsics of the sub-image ``window`` (columns ``[x0, x1)``, rows ``[y0, y1)``
+        [px]): same focal lengths, skew and clipping, principal point
+        ``(u0 - x0, v0 - y0)`` [px]. Rendered with :func:`render_rgb`, its pixel
+        ``[r, c]`` samples the ray of this camera's pixel ``[y0 + r, x0 + c]``
+        (:mod:`repro.sensors.camera_window` says how exactly)."""
+        return Intrinsics(window.width, window.height, self.fu, self.fv,
+                          self.u0 - window.x0, self.v0 - window.y0, self.near, self.far,
+                          self.skew)
 
     def image_bounds(self) -> ImageBounds:
         """The whole image, ``u in [-1/2, W - 1/2]``, ``v in [-1/2, H - 1/2]`` [px]."""
@@ -793,6 +815,8 @@ def _ellipse_fill(moments: Mapping[str, float]) -> float:
     return float(m00 / (4.0 * np.pi * np.sqrt(det))) if det > 0 else 0.0
 
 
+#: :func:`detect_dots` ignores smaller colour components by default [px].
+_MIN_AREA_PX = 6
 #: :meth:`Camera.measure` rejects blobs larger than this factor times the area of the full,
 #: fronto-parallel image of the disc at its depth, pi (f r / Z + 1)^2 [px] (a tilted,
 #: off-axis or close disc images at most ~1.2x that).
@@ -800,7 +824,7 @@ _MAX_AREA_FACTOR = 3.0
 
 
 def detect_dots(rgb: np.ndarray, colors: Sequence[Sequence[int]],
-                min_area_px: int = 6, hue_tolerance: int = _HUE_TOLERANCE,
+                min_area_px: int = _MIN_AREA_PX, hue_tolerance: int = _HUE_TOLERANCE,
                 max_area_px: float | Sequence[float] | np.ndarray | None = None,
                 ) -> tuple[np.ndarray, np.ndarray]:
     """Find the centroid of each coloured dot in an RGB image.
@@ -839,9 +863,22 @@ def detect_dots(rgb: np.ndarray, colors: Sequence[Sequence[int]],
     hues = _check_colors(colors, hue_tolerance)
     max_area = np.broadcast_to(np.inf if max_area_px is None else
                                np.asarray(max_area_px, dtype=float), (len(hues),))
+    blobs = _detect_blobs(rgb, hues, min_area_px, hue_tolerance, max_area)
+    return blobs.uv, blobs.found
+
+
+def _detect_blobs(rgb: np.ndarray, hues: Sequence[int], min_area_px: int, hue_tolerance: int,
+                  max_area: np.ndarray, origin: tuple[int, int] = (0, 0)) -> DotBlobs:
+    """:func:`detect_dots` on validated inputs, also returning each blob's and each colour
+    mask's bounding box; ``origin`` (x0, y0) [px] is the full-image pixel of ``rgb[0, 0]``
+    (a window), added to every coordinate returned (integers first, so that a centroid is
+    the same float as in the full image)."""
     hsv = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2HSV)
     uv = np.full((len(hues), 2), np.nan)
     found = np.zeros(len(hues), dtype=bool)
+    blob_box = np.full((len(hues), 4), -1, dtype=int)
+    mask_box = np.zeros((len(hues), 4), dtype=int)
+    ox, oy = origin
     lo_fill, hi_fill = _ELLIPSE_FILL_RANGE
     for i, hue in enumerate(hues):
         mask = _hue_mask(hsv, hue, hue_tolerance)
@@ -850,6 +887,7 @@ def detect_dots(rgb: np.ndarray, colors: Sequence[Sequence[int]],
         x0, y0, w, h = cv2.boundingRect(mask)
         if w == 0 or h == 0:
             continue
+        mask_box[i] = (x0 + ox, y0 + oy, x0 + ox + w, y0 + oy + h)
         n, labels, stats, centroids = cv2.connectedComponentsWithStats(
             np.ascontiguousarray(mask[y0:y0 + h, x0:x0 + w]), connectivity=8)
         areas = stats[1:, cv2.CC_STAT_AREA]
@@ -863,10 +901,12 @@ def detect_dots(rgb: np.ndarray, colors: Sequence[Sequence[int]],
             blob = (labels[cy:cy + ch, cx:cx + cw] == k).astype(np.uint8)
             if not lo_fill <= _ellipse_fill(cv2.moments(blob, binaryImage=True)) <= hi_fill:
                 continue
-            uv[i] = centroids[k] + (x0, y0)
+            uv[i] = centroids[k] + (x0 + ox, y0 + oy)
             found[i] = True
+            bx, by = x0 + ox + int(cx), y0 + oy + int(cy)
+            blob_box[i] = (bx, by, bx + int(cw), by + int(ch))
             break
-    return uv, found
+    return DotBlobs(uv, found, blob_box, mask_box)
 
 
 @dataclass
@@ -880,16 +920,42 @@ class Camera:
         mode: ``"render"`` (PyBullet TinyRenderer image + :func:`detect_dots`; the target must
             already be spawned in the client at ``T_world_target``) or ``"exact"``
             (:func:`project_points` of the dot centres, no rendering).
+        window: ``"render"`` mode only: None renders every frame in full; a
+            :class:`~repro.sensors.camera_window.WindowPolicy` renders, after a full frame,
+            only windows around the dots' last detections, with the full-frame fallbacks of
+            :mod:`repro.sensors.camera_window` (the camera then keeps state between frames:
+            its last detections; :meth:`reset_windows` forgets them).
+        last_frame: what the last ``"render"`` frame rendered (None before one, and
+            always None without ``window``).
     """
 
     intrinsics: Intrinsics
     T_link_camera: np.ndarray = field(default_factory=lambda: np.eye(4))
     mode: str = "render"
+    window: WindowPolicy | None = None
+    last_frame: FrameReport | None = field(default=None, init=False, repr=False,
+                                           compare=False)
+    _tracker: WindowTracker | None = field(default=None, init=False, repr=False,
+                                           compare=False)
 
     def __post_init__(self) -> None:
         if self.mode not in CAMERA_MODES:
             raise UnknownChoiceError("camera mode", self.mode, CAMERA_MODES)
+        if self.window is not None and not isinstance(self.window, WindowPolicy):
+            raise ConfigError(f"Camera.window must be a WindowPolicy or None, got "
+                              f"{self.window!r}")
         self.T_link_camera = _as_pose(self.T_link_camera, "T_link_camera").copy()
+
+    @property
+    def window_tracker(self) -> WindowTracker | None:
+        """The window state (last detections, frames since a full frame); None before the
+        first windowed frame."""
+        return self._tracker
+
+    def reset_windows(self) -> None:
+        """Forget the last detections: the next ``"render"`` frame is full."""
+        if self._tracker is not None:
+            self._tracker.reset()
 
     def pose(self, T_world_link: np.ndarray) -> np.ndarray:
         """T_world_camera = T_world_link @ T_link_camera (4x4) [m]."""
@@ -925,7 +991,9 @@ class Camera:
             :meth:`max_blob_areas` are not taken for a dot), and in ``"exact"`` mode False
             for dots behind the camera (Z <= 0) or whose centre projects outside the image;
             ``Z`` (N,) depth of each dot centre in the camera frame from the exact
-            geometry [m] (for every dot, found or not).
+            geometry [m] (for every dot, found or not). With :attr:`window` the
+            ``"render"`` result is the same detection made in windows when the policy allows
+            (:mod:`repro.sensors.camera_window`; :attr:`last_frame` says what was rendered).
         """
         if self.mode not in CAMERA_MODES:
             raise UnknownChoiceError("camera mode", self.mode, CAMERA_MODES)
@@ -935,7 +1003,61 @@ class Camera:
             found = (Z > 0) & self.intrinsics.in_image(uv_exact)
             uv = np.where(found[:, None], uv_exact, np.nan)
             return uv, found, Z
+        if self.window is not None:
+            blobs = self._measure_windowed(client_id, T_world_camera, target,
+                                           self.max_blob_areas(target, Z))
+            return blobs.uv.copy(), blobs.found.copy(), Z  # the tracker keeps the originals
         rgb = render_rgb(client_id, self.intrinsics, T_world_camera)
         uv, found = detect_dots(rgb, target.colors, hue_tolerance=target.hue_tolerance,
                                 max_area_px=self.max_blob_areas(target, Z))
         return uv, found, Z
+
+    def _measure_windowed(self, client_id: int, T_world_camera: np.ndarray,
+                          target: DotTarget, max_area: np.ndarray) -> DotBlobs:
+        """One ``"render"`` frame through the window policy (:mod:`repro.sensors.camera_window`):
+        the windows the tracker plans from its last detections, or a full frame (first
+        frame, a dot lost, the period; or after the windows, a dot missed or at a border).
+        Detection as :func:`detect_dots` with the same gates (``max_area`` [px] per dot)."""
+        assert self.window is not None
+        intr = self.intrinsics
+        tracker = self._tracker
+        if tracker is None or tracker.policy != self.window or (
+                tracker.width, tracker.height) != (intr.width, intr.height):
+            tracker = self._tracker = WindowTracker(self.window, intr.width, intr.height)
+        tracker.bind((client_id, id(target), target.n_points))
+        hues = _check_colors(target.colors, target.hue_tolerance)
+        plans, reason = tracker.plan()
+        tried: tuple[PixelWindow, ...] = ()
+        if plans is not None:
+            blobs = self._detect_in_windows(client_id, T_world_camera, hues, target,
+                                            max_area, plans)
+            reason = tracker.check(plans, blobs)
+            tried = tuple(p.window for p in plans)
+            if reason is None:
+                tracker.update(blobs, full=False)
+                self.last_frame = FrameReport("windows", None, tried,
+                                              sum(w.area for w in tried))
+                return blobs
+        rgb = render_rgb(client_id, intr, T_world_camera)
+        blobs = _detect_blobs(rgb, hues, _MIN_AREA_PX, target.hue_tolerance, max_area)
+        tracker.update(blobs, full=True)
+        self.last_frame = FrameReport("full", reason, tried,
+                                      sum(w.area for w in tried) + intr.width * intr.height)
+        return blobs
+
+    def _detect_in_windows(self, client_id: int, T_world_camera: np.ndarray,
+                           hues: Sequence[int], target: DotTarget, max_area: np.ndarray,
+                           plans: Sequence[WindowPlan]) -> DotBlobs:
+        """Render each planned window (:meth:`Intrinsics.crop`) and detect its dots there,
+        in full-image pixel coordinates."""
+        n = target.n_points
+        out = DotBlobs(np.full((n, 2), np.nan), np.zeros(n, dtype=bool),
+                       np.full((n, 4), -1, dtype=int), np.zeros((n, 4), dtype=int))
+        for window, dots in plans:
+            rgb = render_rgb(client_id, self.intrinsics.crop(window), T_world_camera)
+            idx = list(dots)
+            got = _detect_blobs(rgb, [hues[i] for i in idx], _MIN_AREA_PX, target.hue_tolerance,
+                                max_area[idx], origin=(window.x0, window.y0))
+            for field_out, field_got in zip(out, got, strict=True):
+                field_out[idx] = field_got
+        return out
