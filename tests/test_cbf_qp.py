@@ -7,6 +7,7 @@ random QPs of the paper's size.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import daqp  # exact active-set reference; dev dependency in pyproject.toml
 import numpy as np
@@ -376,14 +377,20 @@ def test_hard_qp_over_budget_goes_to_the_fallback(solver: str) -> None:
     assert res.iterations == rs.iterations <= ctrl.relaxed_max_iter
     assert res.solve_time_s == res.solution.solve_time_s + rs.solve_time_s
     # u is the slack QP's exact solution (daqp); the QP was feasible, so the slack is tiny.
-    H = np.zeros((N + M, N + M))
-    H[:N, :N] = obj.H
-    H[N:, N:] = ctrl.slack_weight * np.eye(M)
-    x_ref, _ = _daqp(H, np.r_[obj.g, np.zeros(M)], np.hstack([ineq.A, np.eye(M)]), ineq.b,
-                     np.r_[-QD_MAX, np.zeros(M)], np.r_[QD_MAX, np.full(M, np.inf)])
+    x_ref = _slack_qp_reference(obj, ineq, ctrl.slack_weight)
     np.testing.assert_allclose(res.u, x_ref[:N], atol=1e-6)
     np.testing.assert_allclose(res.slack, x_ref[N:], atol=1e-6)
     np.testing.assert_allclose(res.u, needs.u, atol=1e-2)
+
+
+def _slack_qp_reference(obj: Any, ineq: Any, slack_weight: float) -> np.ndarray:
+    """The relaxed (slack) CBF-QP's exact solution [u; slack] by daqp."""
+    H = np.zeros((N + M, N + M))
+    H[:N, :N] = obj.H
+    H[N:, N:] = slack_weight * np.eye(M)
+    x_ref, _ = _daqp(H, np.r_[obj.g, np.zeros(M)], np.hstack([ineq.A, np.eye(M)]), ineq.b,
+                     np.r_[-QD_MAX, np.zeros(M)], np.r_[QD_MAX, np.full(M, np.inf)])
+    return x_ref
 
 
 def test_quadprog_hard_qp_over_budget_goes_to_the_fallback() -> None:
@@ -403,11 +410,7 @@ def test_quadprog_hard_qp_over_budget_goes_to_the_fallback() -> None:
     rs = res.relaxed_solution
     assert rs is not None and rs.status == "solved"
     assert res.iterations == rs.iterations <= ctrl.relaxed_max_iter
-    H = np.zeros((N + M, N + M))
-    H[:N, :N] = obj.H
-    H[N:, N:] = ctrl.slack_weight * np.eye(M)
-    x_ref, _ = _daqp(H, np.r_[obj.g, np.zeros(M)], np.hstack([ineq.A, np.eye(M)]), ineq.b,
-                     np.r_[-QD_MAX, np.zeros(M)], np.r_[QD_MAX, np.full(M, np.inf)])
+    x_ref = _slack_qp_reference(obj, ineq, ctrl.slack_weight)
     np.testing.assert_allclose(res.u, x_ref[:N], atol=1e-9)
     np.testing.assert_allclose(res.u, needs.u, atol=1e-2)
 
