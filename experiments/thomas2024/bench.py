@@ -4,14 +4,20 @@ The controller step is timed on realistic states: the joint positions recorded
 in results/thomas2024/<case>/trace.csv are replayed (robot reset to each q,
 sensors read, then ``Thomas2024Controller.step`` timed). Without those traces,
 the run is made first (exact camera, 4 s).
+
+The QP solver table (:func:`qp_solver_table`) replays the same states once more, records
+the hard CBF-QPs (10) the controller builds, and times every backend of
+:data:`repro.control.qp.SOLVERS` on that sequence against an exact reference.
 """
 
 from __future__ import annotations
 
 import tempfile
 import time
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -19,7 +25,9 @@ import pandas as pd
 from experiments.thomas2024 import config as C
 from experiments.thomas2024.run import build, run
 from repro.bench import timing_row
+from repro.control.qp import SOLVERS, QPProblem, QPSolution, QPSolver, kkt_residuals
 from repro.runs.trace import load_run
+from repro.sim.panda import PANDA_LIMITS
 
 QPS = C.QP_SOLVERS  # every qp_solver choice
 
@@ -33,8 +41,29 @@ def _states(results_dir: Path, case: str, cfg: C.Thomas2024Config, tmp: Path) ->
     return df[[f"q{i}" for i in range(1, 8)]].to_numpy(dtype=float)
 
 
-def _replay(cfg: C.Thomas2024Config, states: np.ndarray, tmp: Path) -> dict[str, list[float]]:
+class _RecordingSolver(QPSolver):
+    """A :class:`QPSolver` that appends a copy of every problem it is given to ``sink``."""
+
+    def __init__(self, like: QPSolver, sink: list[QPProblem]) -> None:
+        super().__init__(like.n, like.m, like.solver, max_iter=like.max_iter,
+                         max_iter_in=like.max_iter_in, kkt_tol=like.kkt_tol)
+        self.sink = sink
+
+    def solve(self, problem: QPProblem) -> QPSolution:
+        self.sink.append(QPProblem(np.array(problem.H, dtype=float),
+                                   np.array(problem.g, dtype=float),
+                                   *[None if a is None else np.array(a, dtype=float)
+                                     for a in problem[2:]]))  # copies
+        return super().solve(problem)
+
+
+def _replay(cfg: C.Thomas2024Config, states: np.ndarray, tmp: Path,
+            record: list[QPProblem] | None = None) -> dict[str, list[float]]:
+    """Reset the robot to each row of ``states`` (n_states, 7) [rad], read the sensors and
+    time one controller step; with ``record``, every hard QP (10) is appended to it."""
     ep, ctrl = build(cfg, tmp / "bench_setup")
+    if record is not None:
+        ctrl.qp.hard = _RecordingSolver(ctrl.qp.hard, record)
     rig, scene = ep.cameras[0], ep.scene
     target = scene[rig.target]
     assert target.dot_target is not None
@@ -59,13 +88,179 @@ def _replay(cfg: C.Thomas2024Config, states: np.ndarray, tmp: Path) -> dict[str,
     return out
 
 
+class CapturedQPs(NamedTuple):
+    """The hard QPs (10) of one replayed sequence, in the order the controller solved them.
+
+    Attributes:
+        n: variables (7 joint velocities [rad/s]); m: CBF rows (36 proximity sensors).
+        problems: the QPs, arrays copied at capture.
+    """
+
+    n: int
+    m: int
+    problems: list[QPProblem]
+
+
+def capture_hard_qps(cfg: C.Thomas2024Config, states: np.ndarray, tmp: Path) -> CapturedQPs:
+    """The hard CBF-QPs (10) the controller builds along ``states`` (n_states, 7) [rad].
+
+    The committed states are replayed as in :func:`_replay` with the exact camera, so the
+    sequence is deterministic and does not depend on ``cfg.qp_solver`` (a QP's data depend on
+    q and the sensor readings only). Steps without all four dots build no QP.
+    """
+    cfg = replace(cfg, camera_mode="exact")
+    problems: list[QPProblem] = []
+    _replay(cfg, states, tmp, record=problems)
+    if not problems:
+        raise ValueError(f"no hard QP along {len(states)} states: the dots were never all found")
+    C_rows = problems[0].C
+    return CapturedQPs(problems[0].H.shape[0], 0 if C_rows is None else C_rows.shape[0], problems)
+
+
+REF_EPS = 1e-12
+"""DAQP primal tolerance of the reference solves (a row counts as violated beyond it)."""
+REF_MAX_ITER = 100_000
+"""Active-set iteration limit of the reference solves (they take ~10-25 from cold)."""
+
+
+def reference_solutions(qps: CapturedQPs) -> list[QPSolution]:
+    """Exact reference of every QP: a cold DAQP dual active-set solve with primal tolerance
+    :data:`REF_EPS` = 1e-12 and :data:`REF_MAX_ITER` iterations.
+
+    An active-set solve ends on the exact optimum of its final working set, i.e. the
+    reference is exact up to rounding (its KKT residuals are reported by
+    :func:`qp_solver_table`). Cold, so no error carries over from one QP to the next.
+    """
+    ref = QPSolver(qps.n, qps.m, "daqp", eps_abs=REF_EPS, max_iter=REF_MAX_ITER,
+                   warm_start=False)
+    return [ref.solve(p) for p in qps.problems]
+
+
+class SolverStats(NamedTuple):
+    """One backend replayed over a QP sequence, compared with :func:`reference_solutions`.
+
+    Errors are infinity norms over the QPs that both the backend and the reference report
+    "solved" (NaN if there is none), in the units of x (joint velocities [rad/s]) and of the
+    duals (of the rows of (10), [same as b] per [rad/s]).
+
+    Attributes:
+        times_s: wall time of each ``QPSolver.solve`` call [s], in sequence order.
+        max_primal_err: max |x - x_ref|.
+        max_dual_err: max |z - z_ref| (CBF rows).
+        max_dual_box_err: max |z_box - z_box_ref| (joint-velocity bounds).
+        n_not_solved: solves whose status is not "solved" (compare with the reference's).
+        n_infeasible: solves reported "infeasible".
+    """
+
+    times_s: list[float]
+    max_primal_err: float
+    max_dual_err: float
+    max_dual_box_err: float
+    n_not_solved: int
+    n_infeasible: int
+
+
+def replay_solver(solver: str, qps: CapturedQPs, refs: list[QPSolution],
+                  max_iter: int) -> SolverStats:
+    """Solve ``qps`` in order with one fresh, warm-started ``QPSolver(n, m, solver,
+    max_iter=max_iter)``, each solve timed with ``perf_counter``."""
+    qp = QPSolver(qps.n, qps.m, solver, max_iter=max_iter)
+    times: list[float] = []
+    ex, ez, eb = [0.0], [0.0], [0.0]
+    n_not_solved = n_infeasible = n_compared = 0
+    for problem, ref in zip(qps.problems, refs, strict=True):
+        tic = time.perf_counter()
+        sol = qp.solve(problem)
+        times.append(time.perf_counter() - tic)
+        n_not_solved += sol.status != "solved"
+        n_infeasible += sol.status == "infeasible"
+        if sol.status == "solved" and ref.status == "solved":
+            n_compared += 1
+            ex.append(float(np.abs(sol.x - ref.x).max()))
+            ez.append(float(np.abs(sol.z - ref.z).max(initial=0.0)))
+            eb.append(float(np.abs(sol.z_box - ref.z_box).max()))
+    if n_compared == 0:
+        return SolverStats(times, np.nan, np.nan, np.nan, n_not_solved, n_infeasible)
+    return SolverStats(times, max(ex), max(ez), max(eb), n_not_solved, n_infeasible)
+
+
+def infeasible_qp() -> QPProblem:
+    """A known-infeasible QP, n = 7, m = 2: rows x1 >= 1 and -x1 >= 1 (x1 <= -1), in the
+    form ``C x >= l`` of (10), with the Panda's joint-velocity box [rad/s]."""
+    n = 7
+    C_rows = np.zeros((2, n))
+    C_rows[0, 0], C_rows[1, 0] = 1.0, -1.0
+    qd_max = np.asarray(PANDA_LIMITS.qd_max, dtype=float)
+    return QPProblem(np.eye(n), np.zeros(n), C_rows, np.ones(2), np.full(2, np.inf),
+                     -qd_max, qd_max)
+
+
+def qp_solver_table(sequences: Mapping[str, tuple[C.Thomas2024Config, np.ndarray]],
+                    tmp: Path) -> list[dict[str, object]]:
+    """QP solver table: every backend of :data:`SOLVERS` on the hard QPs (10) of each case.
+
+    For each ``case -> (config, states (n_states, 7) [rad])``: the hard QPs are captured
+    (:func:`capture_hard_qps`), solved exactly once for reference (:func:`reference_solutions`:
+    DAQP, an active-set solve exact to rounding, tolerance 1e-12) and replayed per backend in
+    one process with a fresh warm-started solver and ``max_iter`` = the config's
+    ``qp_max_iter`` (200 by default), as the controller does (:func:`replay_solver`).
+
+    Rows (bench.csv schema: benchmark, median_s, p95_s, n). Only the first is seconds; the
+    others put one number in both ``median_s`` and ``p95_s``, with ``n`` = number of QPs:
+
+    - ``<case>.qp_table[<solver>]``: median and p95 of the solve times [s], n = solves;
+    - ``<case>.qp_table[<solver>].max_primal_err``: max |x - x_ref| [rad/s] (not seconds);
+    - ``<case>.qp_table[<solver>].max_dual_err``: max |z - z_ref| (not seconds);
+    - ``<case>.qp_table[<solver>].max_dual_box_err``: max |z_box - z_box_ref| (not seconds);
+    - ``<case>.qp_table[<solver>].n_not_solved``: count of status != "solved" (not seconds);
+    - ``<case>.qp_table[<solver>].n_infeasible``: count of "infeasible" reports (not seconds);
+    - ``<case>.qp_table[daqp_ref].n_not_solved``: QPs the reference did not solve (count, not
+      seconds; these are left out of the errors);
+    - ``<case>.qp_table[daqp_ref].max_kkt_residual``: max over the solved QPs of the
+      reference's KKT residuals (:func:`repro.control.qp.kkt_residuals`; not seconds);
+    - ``qp_table[<solver>].certifies_infeasible``: 1.0 if the solver reports the contradictory
+      QP of :func:`infeasible_qp` "infeasible", else 0.0 (n = 1; a flag, not seconds).
+    """
+    rows: list[dict[str, object]] = []
+
+    def value_row(name: str, value: float, n: int) -> dict[str, object]:
+        return {"benchmark": name, "median_s": float(value), "p95_s": float(value), "n": n}
+
+    for case, (cfg, states) in sequences.items():
+        max_iter = cfg.qp_max_iter
+        qps = capture_hard_qps(cfg, states, tmp)
+        refs = reference_solutions(qps)
+        k = len(qps.problems)
+        solved = [(p, r) for p, r in zip(qps.problems, refs, strict=True) if r.status == "solved"]
+        kkt = max((max(kkt_residuals(p, r).values()) for p, r in solved), default=np.nan)
+        rows.append(value_row(f"{case}.qp_table[daqp_ref].n_not_solved", k - len(solved), k))
+        rows.append(value_row(f"{case}.qp_table[daqp_ref].max_kkt_residual", kkt, k))
+        for solver in SOLVERS:
+            st = replay_solver(solver, qps, refs, max_iter)
+            name = f"{case}.qp_table[{solver}]"
+            rows.append(timing_row(name, st.times_s))
+            rows.append(value_row(f"{name}.max_primal_err", st.max_primal_err, k))
+            rows.append(value_row(f"{name}.max_dual_err", st.max_dual_err, k))
+            rows.append(value_row(f"{name}.max_dual_box_err", st.max_dual_box_err, k))
+            rows.append(value_row(f"{name}.n_not_solved", st.n_not_solved, k))
+            rows.append(value_row(f"{name}.n_infeasible", st.n_infeasible, k))
+    bad, max_iter = infeasible_qp(), C.Thomas2024Config().qp_max_iter
+    for solver in SOLVERS:
+        status = QPSolver(7, 2, solver, max_iter=max_iter).solve(bad).status
+        rows.append(value_row(f"qp_table[{solver}].certifies_infeasible",
+                              float(status == "infeasible"), 1))
+    return rows
+
+
 def bench(results_dir: Path) -> list[dict[str, object]]:
     """Rows for results/bench.csv."""
     rows: list[dict[str, object]] = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
+        sequences: dict[str, tuple[C.Thomas2024Config, np.ndarray]] = {}
         for case, cls in (("case1", C.Case1Config), ("case2", C.Case2Config)):
             states = _states(results_dir, case, cls(), tmp)
+            sequences[case] = (cls(), states)
             for solver in QPS:
                 cfg = replace(cls(), camera_mode="exact", qp_solver=solver)
                 t = _replay(cfg, states, tmp)
@@ -75,6 +270,7 @@ def bench(results_dir: Path) -> list[dict[str, object]]:
                     rows.append(timing_row(f"{case}.ray_casts_36", t["rays"]))
             t = _replay(replace(cls(), camera_mode="render"), states[::5], tmp)
             rows.append(timing_row(f"{case}.camera_render_detect_640x480", t["camera"]))
+        rows += qp_solver_table(sequences, tmp)
     # Whole closed loop, from the committed runs' manifests (render mode).
     for name in ("case1", "case2", "case3"):
         path = results_dir / "thomas2024" / name
