@@ -120,19 +120,23 @@ GAINS = {
 }
 
 
-def _chan_gains(name: str) -> tuple[str, ...]:
-    if name == "dcc_audit":
-        return GAINS["chan2011/dcc_audit"]
-    return GAINS["chan2011/ibvs"] if name.startswith("ibvs") else GAINS["chan2011/nmpc"]
+def _gains(paper: str, name: str) -> tuple[str, ...]:
+    """The :data:`GAINS` entry of experiment ``name`` of ``paper``."""
+    if paper == "chan2011":
+        key = name if name == "dcc_audit" else ("ibvs" if name.startswith("ibvs") else "nmpc")
+        return GAINS[f"chan2011/{key}"]
+    if name.startswith("exp3"):
+        return GAINS["pomares2011/exp3"]
+    return GAINS.get(f"{paper}/{name}", GAINS[paper])
 
 
 REFERENCES: dict[str, Reference] = {
     r.id: r for r in (
-        [Reference("thomas2024", n, _thomas(n), GAINS["thomas2024"]) for n in THOMAS]
-        + [Reference("chan2011", n, _chan(n), _chan_gains(n)) for n in CHAN]
-        + [Reference("pomares2011", n, _pomares(n),
-                     GAINS.get(f"pomares2011/{n}", GAINS["pomares2011"])) for n in POMARES]
-        + [Reference("pomares2011", "exp3", _exp3, GAINS["pomares2011/exp3"])])
+        [Reference("thomas2024", n, _thomas(n), _gains("thomas2024", n)) for n in THOMAS]
+        + [Reference("chan2011", n, _chan(n), _gains("chan2011", n)) for n in CHAN]
+        + [Reference("pomares2011", n, _pomares(n), _gains("pomares2011", n))
+           for n in POMARES]
+        + [Reference("pomares2011", "exp3", _exp3, _gains("pomares2011", "exp3"))])
 }
 
 
@@ -149,11 +153,7 @@ def _committed(exp_id: str) -> Reference:
         config = dataclasses.replace(exp.config_cls(), **kw)  # the committed runs: defaults
         return _drop_timing(load_run(exp.run(config, tmp / name)).trace)
 
-    gains = {"thomas2024": GAINS["thomas2024"], "chan2011": _chan_gains(name),
-             "pomares2011": GAINS.get(f"pomares2011/{name}", GAINS["pomares2011"])}[paper]
-    if name.startswith("exp3"):
-        gains = GAINS["pomares2011/exp3"]
-    return Reference(paper, name, make, gains, committed=True)
+    return Reference(paper, name, make, _gains(paper, name), committed=True)
 
 
 #: Committed runs that ``make test-slow`` reruns whole and compares with results/.

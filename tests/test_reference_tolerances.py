@@ -24,7 +24,6 @@ from references import (
 )
 
 from repro.runs.compare import (
-    CHAOTIC_FRACTION,
     DEFAULT_MARGIN,
     compare_to_reference,
     measure_tolerances,
@@ -65,8 +64,13 @@ def test_a_smooth_column_is_pointwise_with_margin_times_measured(rules: dict) ->
 def test_a_chattering_column_is_compared_by_windows(rules: dict) -> None:
     r = rules["columns"]["qd"]
     assert r["stable"] < N and len(r["windows"]) >= 1
-    # its pointwise deviation (2e-3) would be 10x beyond a tenth of its excursion
-    assert DEFAULT_MARGIN * 2e-3 > CHAOTIC_FRACTION * r["scale"]
+    # the windows cover the chaotic stretch, end to end, without gaps
+    edges = [w["rows"] for w in r["windows"]]
+    assert edges[0][0] == r["stable"] and edges[-1][1] == N
+    assert all(a[1] == b[0] for a, b in zip(edges[:-1], edges[1:], strict=True))
+    # and each window's tolerance is the margin times its own measured deviation
+    for w in r["windows"]:
+        assert all(w["atol"][k] == DEFAULT_MARGIN * w["measured"][k] for k in w["atol"])
 
 
 def test_the_reruns_pass_and_the_reference_passes_itself(rules: dict) -> None:

@@ -159,7 +159,7 @@ def machine_description() -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- measuring
-def _measure_float(col: str, ref: np.ndarray, runs: Mapping[str, np.ndarray], n: int,
+def _measure_float(ref: np.ndarray, runs: Mapping[str, np.ndarray], n: int,
                    margin: float) -> dict[str, Any]:
     devs = {k: _deviation(v[:n], ref[:n]) for k, v in runs.items()}
     d = np.max(np.vstack(list(devs.values())), axis=0) if devs else np.zeros(n)
@@ -224,7 +224,7 @@ def measure_tolerances(ref: pd.DataFrame, runs: Mapping[str, pd.DataFrame], *,
     for c in ref.columns:
         s = ref[c]
         if _is_float(s) or any(_is_float(v[c]) for v in runs.values()):
-            columns[c] = _measure_float(c, _as_float(s),
+            columns[c] = _measure_float(_as_float(s),
                                         {k: _as_float(v[c]) for k, v in runs.items()}, n,
                                         margin)
             continue
@@ -233,7 +233,7 @@ def measure_tolerances(ref: pd.DataFrame, runs: Mapping[str, pd.DataFrame], *,
         if all(not _compare_exact(c, v[c], s, n) for v in runs.values()):
             columns[c] = {"kind": "exact"}
         elif s.dtype.kind in "biu":
-            columns[c] = _measure_float(c, _as_float(s),
+            columns[c] = _measure_float(_as_float(s),
                                         {k: _as_float(v[c]) for k, v in runs.items()}, n,
                                         margin)
         else:

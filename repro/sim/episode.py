@@ -365,7 +365,6 @@ class _Runner:
         self._flags: dict[str, bool] = {}
         self.collided: set[tuple[str, str]] = set()
         self.held: dict[str, tuple[Features, dict[str, Scalar]]] = {}
-        self.t_ctrl = 0.0
         self.dist_min: dict[str, tuple[float, float]] = {}  # column -> (min [m], at t [s])
 
     def onset(self, key: str, now: bool, t: float, k: int, kind: str, detail: str,
@@ -536,7 +535,6 @@ class _Runner:
             res = ep.controller(Observation(t, k, q, qd, feats, readings))
             t_ctrl = time.perf_counter() - tic
             row["ctrl_s"] = t_ctrl
-            self.t_ctrl += t_ctrl
             split["controller_s"] += t_ctrl
             tic2 = clock()
             row.update(res.columns)
@@ -608,7 +606,8 @@ class _Runner:
             rec.event(k * dt, k, "never_commanded", reason)
         rec.summary["commanded_steps"] = n_commanded
         rec.summary.update({"n_steps": k + 1, "sim_time_s": k * dt,
-                            "mean_control_s": self.t_ctrl / (k + 1), "stop_reason": reason})
+                            "mean_control_s": split["controller_s"] / (k + 1),
+                            "stop_reason": reason})
         rec.summary["audit"] = {name: a.summary() for name, a in self.audit.items()}
         rec.summary["log_every"] = ep.log_every
         rec.summary["min_over_all_steps"] = {
