@@ -10,7 +10,7 @@ import pybullet as p
 import pytest
 
 from experiments.pomares2011 import scene as sc
-from experiments.pomares2011.run import human_distance
+from experiments.pomares2011.human_tracking import human_distance
 from repro.control.hybrid_vs import distance_gradient_from_joints
 from repro.control.indirect_vs import ibvs_velocity_reference, pd_gains_from_inertia
 from repro.errors import ConfigError
@@ -170,7 +170,7 @@ def test_chain_jacobians_match_finite_differences(chain: Robot, seed: int, frame
 def test_mini_robot_task_jacobian_matches_finite_differences(chain: Robot, seed: int) -> None:
     """J = L_s J_g (eq. 6) of the four dots in pixels against finite differences of their
     exact projections over the mini-robot's joints (the PA-10 fixed)."""
-    from experiments.pomares2011.run import pixel_interaction_matrix
+    from experiments.pomares2011.controller import pixel_interaction_matrix
     from repro.sensors.camera import project_points
 
     rng = np.random.default_rng(seed)

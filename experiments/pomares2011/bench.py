@@ -13,7 +13,8 @@ import pandas as pd
 
 from experiments.pomares2011 import scene as sc
 from experiments.pomares2011.config import Exp2Config
-from experiments.pomares2011.run import build, human_distance
+from experiments.pomares2011.human_tracking import human_distance
+from experiments.pomares2011.run import build
 from repro.bench import timing_row
 from repro.sim.episode import Features, Observation
 from repro.vision.pose import pose_from_points

@@ -46,7 +46,8 @@ from experiments.pomares2011 import exp3 as e3
 from experiments.pomares2011 import scene as sc
 from experiments.pomares2011.columns import declare_columns as approach_columns
 from experiments.pomares2011.config import Pomares2011Config
-from experiments.pomares2011.run import HAND_IDX, Pomares2011Controller, build_parts
+from experiments.pomares2011.controller import HAND_IDX, Pomares2011Controller
+from experiments.pomares2011.run import build_parts
 from repro.config import param, validate
 from repro.errors import ConfigError
 from repro.geometry import Rx, Rz, make_T, rot_y, trans

@@ -430,6 +430,19 @@ class HybridVSController:
 
     def __init__(self, config: HybridVSConfig) -> None:
         self.config = config
+        #: ``W`` of the last (L_s, rows): between camera frames the features, and so L_s,
+        #: are held, and the SVD of Sec. 3.1 would give the same W again
+        self._W_memo: tuple[bytes, tuple[int, ...], np.ndarray] | None = None
+
+    def _weight_matrix(self, L_s: np.ndarray, rows: list[int]) -> np.ndarray:
+        """:func:`weight_matrix` of ``L_s[rows]``, memoised on the last bit-identical input."""
+        key, r = L_s.tobytes(), tuple(rows)
+        memo = self._W_memo
+        if memo is not None and memo[0] == key and memo[1] == r:
+            return memo[2]
+        W = weight_matrix(L_s, rows, self.config.rank_tol)
+        self._W_memo = (key, r, W)
+        return W
 
     def damping(self, active: bool) -> np.ndarray:
         """``K_v`` of (5): ``K_v_active`` while the secondary task acts (if given)."""
@@ -470,7 +483,7 @@ class HybridVSController:
         rows = list(cfg.avoid_rows) if (active and cfg.avoid_rows is not None) else list(
             range(k))
         e_s = cfg.s_star[rows] - s[rows]  # eq. (1): e_s = s* - s
-        W = weight_matrix(L_s, rows, cfg.rank_tol)  # Sec. 3.1
+        W = self._weight_matrix(L_s, rows)  # Sec. 3.1
         e1 = primary_task(W, L_s[rows], e_s)  # eqs. (1)-(2)
         e2, de2_dr = 0.0, None
         if active:

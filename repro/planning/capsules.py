@@ -209,6 +209,24 @@ def _fcl_signed_distance(oa: fcl.CollisionObject, ob: fcl.CollisionObject) -> fl
     return float(fcl.distance(oa, ob, fcl.DistanceRequest(), fcl.DistanceResult()))
 
 
+#: python-fcl objects of the capsules seen last, by id (each entry holds its capsule, so
+#: the id cannot be reused while it is here): a capsule that comes back (a still person's
+#: body, held between tracker samples) is not rebuilt. Same object, same distances.
+_FCL_MEMO: dict[int, tuple[Capsule, fcl.CollisionObject]] = {}
+_FCL_MEMO_SIZE = 64  # ours: a few skeletons' worth of capsules
+
+
+def _fcl_object_of(c: Capsule) -> fcl.CollisionObject:
+    got = _FCL_MEMO.get(id(c))
+    if got is not None and got[0] is c:
+        return got[1]
+    if len(_FCL_MEMO) >= _FCL_MEMO_SIZE:
+        _FCL_MEMO.clear()
+    obj = c.fcl_object()
+    _FCL_MEMO[id(c)] = (c, obj)
+    return obj
+
+
 def min_distance(set_a: Sequence[Capsule], set_b: Sequence[Capsule],
                  method: str = "analytic") -> tuple[float, int, int]:
     """Minimum signed distance over every pair of ``set_a`` x ``set_b`` [m]
@@ -236,9 +254,9 @@ def min_distance(set_a: Sequence[Capsule], set_b: Sequence[Capsule],
                 if d < best[0]:
                     best = (d, i, j)
     else:
-        objs_b = [b.fcl_object() for b in set_b]
+        objs_b = [_fcl_object_of(b) for b in set_b]
         for i, a in enumerate(set_a):
-            oa = a.fcl_object()
+            oa = _fcl_object_of(a)
             for j, ob in enumerate(objs_b):
                 d = _fcl_signed_distance(oa, ob)
                 if d < best[0]:

@@ -25,6 +25,7 @@ equations and nothing else. The runner owns everything else, identically for eve
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -366,6 +367,9 @@ class _Runner:
         self.collided: set[tuple[str, str]] = set()
         self.held: dict[str, tuple[Features, dict[str, Scalar]]] = {}
         self.dist_min: dict[str, tuple[float, float]] = {}  # column -> (min [m], at t [s])
+        #: per (column prefix, bodies): the distance columns and which bodies are obstacles
+        self._dist_cols: dict[tuple[str, tuple[str, ...]],
+                              tuple[dict[str, str], dict[str, bool]]] = {}
 
     def onset(self, key: str, now: bool, t: float, k: int, kind: str, detail: str,
               end_detail: str | None = None) -> None:
@@ -455,8 +459,9 @@ class _Runner:
         for (name, robot), dists in zip(groups.items(), scene.distances_of(list(groups.values())),
                                         strict=True):
             pre = robot.column_prefix
+            cols, obstacle = self._distance_columns(pre, dists)
             for body, d in dists.items():
-                row[f"{pre}dist_{body}"] = d
+                row[cols[body]] = d
                 if d <= 0.0 and (name, body) not in self.collided:
                     self.collided.add((name, body))
                     # an obstacle touched is a collision; a body the robot touches on purpose
@@ -465,21 +470,41 @@ class _Runner:
                     self.rec.summary[f"{'collided' if hit else 'touched'}_{body}"] = True
                     self.rec.event(t, k, "collision" if hit else "contact",
                                    f"{name} touches {body} (distance {d:.4f} m)")
-            obstacles = [d for b, d in dists.items()
-                         if scene[b].robot is None and scene[b].obstacle]
-            d_min = min(obstacles) if obstacles else float("nan")
-            row[f"{pre}dist_min"] = d_min
-            for body, d in [*dists.items(), ("min", d_min)]:
-                col = f"{pre}dist_{body}"
-                best = self.dist_min.get(col)
-                if np.isfinite(d) and (best is None or d < best[0]):
-                    self.dist_min[col] = (float(d), t)
+            d_min = min([d for b, d in dists.items() if obstacle[b]], default=math.nan)
+            row[cols["min"]] = d_min
+            best_of = self.dist_min
+            for body, d in dists.items():
+                self._keep_min(best_of, cols[body], d, t)
+            self._keep_min(best_of, cols["min"], d_min, t)
         if not log:
             return
         for moving in scene.moving_bodies():
             pos, quat = pose_to_pb(moving.T_world)
             for c, v in zip(pose_columns(moving.name), pos + quat, strict=True):
                 row[c] = v
+
+    def _distance_columns(self, pre: str, dists: dict[str, float]
+                          ) -> tuple[dict[str, str], dict[str, bool]]:
+        """The distance columns of a robot (``<pre>dist_<body>``, ``<pre>dist_min``) and
+        whether each body is an obstacle (a body with no robot, marked obstacle), built
+        once per robot and set of bodies."""
+        key = (pre, tuple(dists))
+        got = self._dist_cols.get(key)
+        if got is None:
+            scene = self.ep.scene
+            cols = {body: f"{pre}dist_{body}" for body in dists}
+            cols["min"] = f"{pre}dist_min"
+            obstacle = {b: scene[b].robot is None and scene[b].obstacle for b in dists}
+            got = self._dist_cols[key] = (cols, obstacle)
+        return got
+
+    @staticmethod
+    def _keep_min(best_of: dict[str, tuple[float, float]], col: str, d: float, t: float
+                  ) -> None:
+        """Keep the smallest finite distance of ``col`` and its time."""
+        best = best_of.get(col)
+        if math.isfinite(d) and (best is None or d < best[0]):
+            best_of[col] = (float(d), t)
 
     def snapshot(self, k: int) -> None:
         import imageio.v2 as imageio

@@ -57,6 +57,19 @@ class JointLimits:
                                   f"entries, expected {n}")
 
 
+#: Joint resets so far, by any :class:`JointSet` (a reset invalidates the joint states a
+#: :class:`Robot` caches between physics steps). Code that moves joints behind this module's
+#: back (``p.resetJointState``, ``p.stepSimulation`` on a Robot's client) must call
+#: :func:`joint_states_changed`.
+_RESETS = [0]
+
+
+def joint_states_changed() -> None:
+    """Tell every :class:`Robot` that its joints moved outside :meth:`JointSet.reset` and
+    :meth:`World.step_physics` (its cached joint states are stale)."""
+    _RESETS[0] += 1
+
+
 class JointSet:
     """Joint state and motor commands of a set of joints of one PyBullet body.
 
@@ -89,6 +102,7 @@ class JointSet:
 
     def reset(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
         """Teleport the joints to ``q`` [rad] with velocities ``qd`` [rad/s] (default 0)."""
+        _RESETS[0] += 1  # every robot's cached joint states are stale now
         qd = np.zeros(self.n) if qd is None else qd
         for j, qi, qdi in zip(self.pb_joints, q, qd, strict=True):
             p.resetJointState(self.body, j, float(qi), float(qdi), physicsClientId=self.client)
@@ -197,12 +211,24 @@ class Robot(JointSet):
         self.pb_joints = [self._pb_joint[n] for n in self.joint_names]
         self.n = len(self.joint_names)
 
+        #: (physics step, reset count) of the cached joint states, and the states: one
+        #: getJointStates per physics step for every reader (the runner, the drives, the
+        #: controller and the groups of one chain read the same state several times a step)
+        self._states_key: tuple[int, int] | None = None
+        self._q_now = np.zeros(0)
+        self._qd_now = np.zeros(0)
         self.model = pin.buildModelFromUrdf(str(self.urdf_path))
         self.data = self.model.createData()
+        self._g_memo: tuple[bytes, np.ndarray] | None = None  # g(q) of the last q
+        #: a second workspace for the dynamics (CRBA, RNEA), so that M(q) and g(q) leave the
+        #: kinematics cached in ``data`` valid (same values: each algorithm starts afresh)
+        self._data_dyn = self.model.createData()
         # Map control order -> pinocchio q index (all our joints are 1-DoF revolute/prismatic).
         self._pin_q_idx = np.array(
             [self.model.joints[self.model.getJointId(n)].idx_q for n in self.joint_names]
         )
+        self._upper = np.triu(np.ones((self.model.nq, self.model.nq), dtype=bool))
+        self._ix_ctrl = np.ix_(self._pin_q_idx, self._pin_q_idx)
         if self.model.nq != self.n:
             raise ConfigError(
                 f"pinocchio model has nq={self.model.nq} but {self.n} controlled joints; "
@@ -231,23 +257,47 @@ class Robot(JointSet):
             raise UnknownChoiceError("link", link, self._pb_link)
         return self._pb_link[link]
 
+    def q(self) -> np.ndarray:
+        """Joint positions [rad], control order (read once per physics step)."""
+        return self._joint_states()[0].copy()
+
+    def qd(self) -> np.ndarray:
+        """Joint velocities [rad/s], control order (read once per physics step)."""
+        return self._joint_states()[1].copy()
+
+    def _joint_states(self) -> tuple[np.ndarray, np.ndarray]:
+        """(q, qd) as PyBullet has them now, cached until the next physics step or reset."""
+        key = (self.world.physics_steps, _RESETS[0])
+        if key != self._states_key:
+            states = p.getJointStates(self.body, self.pb_joints, physicsClientId=self.client)
+            self._q_now = np.array([st[0] for st in states])
+            self._qd_now = np.array([st[1] for st in states])
+            self._states_key = key
+        return self._q_now, self._qd_now
+
     def gravity_torques(self, q: np.ndarray) -> np.ndarray:
         """g(q): joint torques [N m] that hold the robot still at ``q`` (pinocchio RNEA with
-        zero velocity and acceleration, gravity of the world)."""
-        qp = self._pin_q(np.asarray(q, dtype=float))
+        zero velocity and acceleration, gravity of the world); the last q's is reused."""
+        q = np.asarray(q, dtype=float)
+        key = q.tobytes()
+        if self._g_memo is not None and self._g_memo[0] == key:
+            return self._g_memo[1].copy()
+        qp = self._pin_q(q)
         self.model.gravity.linear = np.asarray(self.world.config.gravity, dtype=float) @ (
             self.T_world_base[:3, :3])
-        g = pin.computeGeneralizedGravity(self.model, self.data, qp)
-        self._pin_q_key = None  # the kinematics cache no longer matches data
-        return np.asarray(g)[self._pin_q_idx]
+        g = np.asarray(pin.computeGeneralizedGravity(self.model, self._data_dyn, qp)
+                       )[self._pin_q_idx]
+        self._g_memo = (key, g)
+        return g.copy()
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """M(q) [kg m^2] (n, n), control order (pinocchio CRBA, symmetrised)."""
         qp = self._pin_q(np.asarray(q, dtype=float))
-        M = pin.crba(self.model, self.data, qp)
-        M = np.triu(M) + np.triu(M, 1).T
-        self._pin_q_key = None  # the kinematics cache no longer matches data
-        return np.asarray(M)[np.ix_(self._pin_q_idx, self._pin_q_idx)]
+        M = np.asarray(pin.crba(self.model, self._data_dyn, qp))  # the upper triangle
+        # symmetrised: upper entries kept, lower ones mirrored (+ 0.0: -0.0 -> 0.0, as
+        # np.triu(M) + np.triu(M, 1).T gives)
+        M = np.where(self._upper, M, M.T) + 0.0
+        return M[self._ix_ctrl]
 
     # ------------------------------------------------------------ kinematics
     def _pin_q(self, q: np.ndarray) -> np.ndarray:
@@ -377,6 +427,14 @@ class JointGroup(JointSet):
                 j = p.getJointInfo(robot.body, j, physicsClientId=robot.client)[16]
             if (j >= 0 and j in mine) or (j < 0 and owns_base):
                 self.links.append(link)
+
+    def q(self) -> np.ndarray:
+        """The group's joint positions [rad] (the chain's states of this physics step)."""
+        return self.robot._joint_states()[0][self.idx]
+
+    def qd(self) -> np.ndarray:
+        """The group's joint velocities [rad/s] (the chain's states of this physics step)."""
+        return self.robot._joint_states()[1][self.idx]
 
     def gravity_torques(self, q: np.ndarray | None = None) -> np.ndarray:
         """The group's part of g(q) [N m], at the whole chain's current configuration

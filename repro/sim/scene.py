@@ -205,6 +205,8 @@ class Scene:
         self.mirror: World | None = World(world_config) if render else None
         self.run_dir = Path(run_dir) if run_dir is not None else None
         self.bodies: dict[str, SceneBody] = {}
+        self._others_memo: dict[tuple[int, int], list[tuple[str, list[int]]]] = {}
+        self._links_memo: dict[int, tuple[list[int], frozenset[int]]] = {}
         #: every joint group by name (:meth:`add_joint_group`); the runner logs the groups no
         #: drive covers (positions, velocities, ground-truth distances)
         self.joint_groups: dict[str, JointGroup] = {}
@@ -504,8 +506,7 @@ class Scene:
         out = []
         for robot in robots:
             full = getattr(robot, "robot", robot)  # a JointGroup's whole chain
-            links = getattr(robot, "links", None)
-            own = None if links is None else frozenset(links)
+            own = self._own_links(robot)
             dists = {}
             for name, ids in self._others(full):
                 d = max_distance
@@ -526,10 +527,25 @@ class Scene:
             out.append(dists)
         return out
 
+    def _own_links(self, robot: JointSet) -> frozenset[int] | None:
+        """The PyBullet links a joint group moves (None: a whole robot, every link)."""
+        links = getattr(robot, "links", None)
+        if links is None:
+            return None
+        got = self._links_memo.get(id(robot))
+        if got is None or got[0] is not links:
+            got = self._links_memo[id(robot)] = (links, frozenset(links))
+        return got[1]
+
     def _others(self, full: JointSet) -> list[tuple[str, list[int]]]:
-        """(name, PyBullet ids) of every body with a collision shape but ``full``."""
-        return [(b.name, b.ids) for b in self.bodies.values()
-                if b.collision and b.robot is not full]
+        """(name, PyBullet ids) of every body with a collision shape but ``full`` (kept until
+        a body is added)."""
+        key = (id(full), len(self.bodies))
+        got = self._others_memo.get(key)
+        if got is None:
+            got = self._others_memo[key] = [(b.name, b.ids) for b in self.bodies.values()
+                                            if b.collision and b.robot is not full]
+        return got
 
     # -------------------------------------------------------- sensors, frames
     def add_mount(self, name: str, robot: str, parent_link: str, T_parent_frame: np.ndarray,
