@@ -17,10 +17,12 @@ import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
+import experiments.pomares2011.scene as pomares_scene
 import experiments.thomas2024.config as thomas_config
 import repro.sensors.camera as camera_module
 from experiments.pomares2011.config import Exp1Config
 from experiments.pomares2011.run import build as build_pomares
+from experiments.pomares2011.run import run as run_pomares
 from experiments.pomares2011.scene import INTRINSICS as POMARES_INTRINSICS
 from experiments.thomas2024.run import build as build_thomas
 from repro.errors import ConfigError
@@ -212,6 +214,9 @@ def test_pomares_margin() -> None:
     bound = image_motion_bound_px(POMARES_INTRINSICS, *POMARES_SPEED)
     assert 21.5 < bound < 22.0
     assert WindowPolicy.for_camera_speed(POMARES_INTRINSICS, *POMARES_SPEED).margin_px == 23
+    # the runs use the same bounds (experiments/pomares2011/scene.py)
+    assert (pomares_scene.WINDOW_OMEGA_MAX, pomares_scene.WINDOW_V_MAX,
+            pomares_scene.WINDOW_Z_MIN) == POMARES_SPEED[1:]
 
 
 def test_window_policy_rejects_bad_values() -> None:
@@ -439,3 +444,36 @@ def test_windows_never_use_the_exact_projection(pomares: Setup,
         assert a.report == b.report
         np.testing.assert_array_equal(a.uv, b.uv)
         np.testing.assert_array_equal(a.found, b.found)
+
+
+# ------------------------------------------------------------ in a pomares2011 run
+def test_pomares_runs_render_windows_with_the_full_frame_detections(tmp_path: Path) -> None:
+    """A 0.1 s rendered exp1 run (20 frames at 200 fps) with the windows the config turns on
+    by default against the same run in full frames: the trace says what each logged frame
+    rendered (full on the first, windows after), the windows cost a fraction of the pixels,
+    and the detections and found flags are the full frames' (to one tie pixel, the
+    closed loop then follows the same path); scene.json states the policy."""
+    from repro.runs.trace import load_run
+
+    def go(windows: bool) -> pd.DataFrame:
+        cfg = dataclasses.replace(Exp1Config(), camera_mode="render", duration=0.1,
+                                  log_every=5, camera_windows=windows)
+        out = tmp_path / f"windows_{windows}"
+        run_pomares(cfg, out)
+        return load_run(out).trace
+
+    win, full = go(True), go(False)
+    assert "camera_frame" not in full.columns
+    assert win["camera_frame"].iloc[0] == "full:first"
+    assert (win["camera_frame"].iloc[1:] == "windows").all()
+    assert (win["camera_rendered_px"].iloc[1:] < 0.1 * 640 * 480).all()
+    uv = [f"s{i}_{a}" for i in range(1, 5) for a in "uv"]
+    assert np.abs(win[uv].to_numpy() - full[uv].to_numpy()).max() <= TIE_TOL_PX
+    found = [f"s{i}_found" for i in range(1, 5)]
+    assert (win[found].to_numpy() == full[found].to_numpy()).all()
+    import json
+
+    cam = json.loads((tmp_path / "windows_True" / "scene.json").read_text())["cameras"]
+    assert cam["camera"]["windows"]["margin_px"] == 23
+    assert json.loads((tmp_path / "windows_False" / "scene.json").read_text())[
+        "cameras"]["camera"]["windows"] is None

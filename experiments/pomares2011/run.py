@@ -23,6 +23,7 @@ from experiments.pomares2011.learning import learn_s_u_star
 from repro.config import validate
 from repro.errors import ConfigError
 from repro.sensors.camera import Camera, check_scene_colors
+from repro.sensors.camera_window import WindowPolicy
 from repro.sim import barrett as B
 from repro.sim.drives import PositionReferenceDrive, TorqueDrive, VelocityDrive
 from repro.sim.episode import CameraRig, Episode, View, run_episode
@@ -79,9 +80,15 @@ def build_parts(config: Pomares2011Config, out_dir: Path,
                     "the mini-robot camera (x right, y down, z forward)")
     scene.add_mount("rvc", "pa10", "pa10_flange", sc.T_FLANGE_RVC,
                     "the Reference Virtual Camera (virtual: nothing is rendered)")
-    rig = CameraRig("camera", "s", Camera(sc.INTRINSICS, mode=config.camera_mode), chain,
+    window = (WindowPolicy.for_camera_speed(
+        sc.INTRINSICS, config.camera_period / config.physics_rate, sc.WINDOW_OMEGA_MAX,
+        sc.WINDOW_V_MAX, sc.WINDOW_Z_MIN)
+        if config.camera_mode == "render" and config.camera_windows else None)
+    rig = CameraRig("camera", "s", Camera(sc.INTRINSICS, mode=config.camera_mode,
+                                          window=window), chain,
                     "mini_camera_optical", np.eye(4), "dots", period=config.camera_period)
     learned = learn_s_u_star(scene, chain, rig, layout)  # Sec. 5.1 step (4), before the run
+    rig.camera.reset_windows()  # the run's first frame is full, whatever the learning saw
     bones = Bones(human) if human is not None else None
     ctrl = Pomares2011Controller(config, chain, arm, mini, bones, learned.s_u_star,
                                  layout=layout)

@@ -76,6 +76,16 @@ INTRINSICS = Intrinsics(width=IMAGE_W, height=IMAGE_H, fu=1082.3, fv=1073.7, u0=
 #: inside a 640 x 480 image: our reading is the same intrinsics as the real camera
 #: (repro/control/rvc.py). Being virtual it has no image bounds.
 RVC_INTRINSICS = INTRINSICS
+
+#: Speed bounds of the mini-robot camera that size the rendered camera's windows
+#: (repro.sensors.camera_window.WindowPolicy.for_camera_speed): [rad/s], [m/s], nearest dot
+#: depth [m]. ours: the camera's largest speeds along the committed exp1 run, 2.27 rad/s
+#: and 0.17 m/s (a 200 fps replay of its first 0.3 s), rounded up; the dots are >= 0.21 m
+#: from the camera along it, 0.19 m is the scene's nearest. A faster motion costs full
+#: frames ("edge", "missed"), never a different detection.
+WINDOW_OMEGA_MAX = 2.5
+WINDOW_V_MAX = 0.2
+WINDOW_Z_MIN = 0.19
 #: Pose of the RVC in ``pa10_flange``. ours: the paper puts the RVC "at the end of the
 #: robotic manipulator" (Sec. 5.1); we put it in the palm (``bh8_palm``, 79 mm out on the
 #: hand axis, same axes as the flange): a virtual eye-in-hand camera looking along the

@@ -25,6 +25,7 @@ equations and nothing else. The runner owns everything else, identically for eve
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -283,6 +284,13 @@ def runner_columns(ep: Episode) -> Columns:
         cols.add(f"{s}{{i}}_err_px", "px", "audit: distance between detection and exact "
                  "projection of point {i} (NaN if not found)", n=n, audit=True)
         cols.add(f"{cam.name}_render_s", "s", f"{cam.name}: wall time of render + detection")
+        if cam.camera.window is not None:
+            cols.add(f"{cam.name}_frame", "text", f"{cam.name}: what this frame rendered: "
+                     "'windows' (only windows around the dots' last detections) or "
+                     "'full:<reason>' (first, lost, period, missed, edge; "
+                     "repro.sensors.camera_window)")
+            cols.add(f"{cam.name}_rendered_px", "px", f"{cam.name}: pixels rendered for "
+                     "this frame (windows and full frame)")
         if cam.period > 1:
             cols.add(f"{cam.name}_new_frame", "bool", f"{cam.name}: a new frame was taken at "
                      f"this step (every {cam.period} control steps; else the last one is held)")
@@ -407,6 +415,14 @@ class _Runner:
         tic = time.perf_counter()
         uv, found, Z = cam.camera.measure(scene.render_client, T_wc, target, body.T_world)
         row[f"{cam.name}_render_s"] = time.perf_counter() - tic
+        if cam.camera.window is not None:
+            rep = cam.camera.last_frame
+            if rep is None:  # the exact mode renders nothing
+                row[f"{cam.name}_frame"], row[f"{cam.name}_rendered_px"] = "none", 0
+            else:
+                row[f"{cam.name}_frame"] = (rep.kind if rep.reason is None
+                                            else f"{rep.kind}:{rep.reason}")
+                row[f"{cam.name}_rendered_px"] = rep.rendered_px
         pos, quat = pose_to_pb(T_wc)
         for c, v in zip(pose_columns(cam.name), pos + quat, strict=True):
             row[c] = v
@@ -730,4 +746,13 @@ def _camera_json(cam: Camera) -> dict[str, Any]:
                         "flags=ER_NO_SEGMENTATION_MASK; view matrix = diag(1,-1,-1,1) "
                         "inv(T_world_camera); projection: see repro.sensors.camera."
                         "Intrinsics.projection_matrix_gl('tiny')",
-            "projection_matrix_gl": i.projection_matrix_gl("tiny")}
+            "projection_matrix_gl": i.projection_matrix_gl("tiny"),
+            "windows": None if cam.window is None else {
+                **dataclasses.asdict(cam.window),
+                "meaning": "after a full frame, only windows around the dots' last detections "
+                           "are rendered, through Intrinsics.crop (the same rays); a full "
+                           "frame on the first frame, after a lost dot, every full_every "
+                           "frames, and again when a dot is missed in its window or its mask "
+                           "reaches within edge_px of a window's inner border "
+                           "(repro.sensors.camera_window); the trace's <camera>_frame says "
+                           "which"}}
