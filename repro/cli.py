@@ -23,6 +23,7 @@ import contextlib
 import dataclasses
 import json
 import os
+import re
 import signal
 import sys
 import time
@@ -377,10 +378,9 @@ def _running_elsewhere(run_dir: Path) -> str | None:
 
 
 def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if not re.fullmatch(r"[0-9]+", text.strip()):  # int() would also take 1_0, +5, other digits
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number")
+    value = int(text)
     if not 1 <= value <= 1024:
         raise argparse.ArgumentTypeError(f"{value} is not in [1, 1024]")
     return value

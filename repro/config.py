@@ -33,6 +33,7 @@ import dataclasses
 import enum
 import functools
 import math
+import re
 import types
 import typing
 from collections.abc import Sequence
@@ -331,6 +332,22 @@ def _parse(text: str, tp: Any, key: str) -> Any:
         raise ConfigError(f"cannot parse {key}={text!r}: expected {type_name(tp)}") from None
 
 
+#: Plain decimal numbers only: Python's int() and float() also take ``1_0`` (= 10), other
+#: scripts' digits and, for int, nothing else surprising; a config value must mean what it
+#: reads. Floats may also be nan/inf by name (then refused by name, see validate()).
+_INT_RE = re.compile(r"[+-]?[0-9]+")
+_FLOAT_RE = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?"
+                       r"|[+-]?(nan|inf|infinity)", re.IGNORECASE)
+
+
+def _plain_number(text: str, pattern: re.Pattern[str]) -> str:
+    """``text`` without surrounding blanks if it is a plain decimal number; ValueError else."""
+    t = text.strip()
+    if not pattern.fullmatch(t):
+        raise ValueError(text)
+    return t
+
+
 def _parse_as(text: str, tp: Any, key: str) -> Any:
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
@@ -385,9 +402,9 @@ def _parse_as(text: str, tp: Any, key: str) -> Any:
             f"cannot parse {key}={text!r}: expected bool, one of {', '.join(_TRUE + _FALSE)}"
         )
     if tp is int:
-        return int(text)
+        return int(_plain_number(text, _INT_RE))
     if tp is float:
-        return float(text)  # validate() rejects nan/inf, naming the field
+        return float(_plain_number(text, _FLOAT_RE))  # validate() rejects nan/inf by name
     if tp is str:
         return text
     if tp is Path:

@@ -609,3 +609,11 @@ def test_results_reruns_a_dead_default_run_but_not_a_live_one(papers, runners, t
     assert "ran    fake.case1  (last run status is 'interrupted'" in out
     assert f"busy   other.case3  (running as pid {os.getpid()}" in out
     assert runners["other.case3"].calls == []
+
+
+@pytest.mark.parametrize("jobs", ["1_0", "+2", "0x2", "\u0662", "2.0", "0", "1025"])
+def test_jobs_takes_a_plain_whole_number(tmp_path: Path, jobs: str, capsys) -> None:
+    """``-j 1_0`` would be int()'s 10: refused before anything is written, like 0 or 1025."""
+    assert cli.main(["--results", str(tmp_path / "r"), "results", "-j", jobs]) == 2
+    assert "-j/--jobs" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()

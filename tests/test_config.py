@@ -153,6 +153,24 @@ def test_override_nested_key():
     assert Cfg().camera.fu == 500.0
 
 
+@pytest.mark.parametrize("item", ["steps=1_0", "gain=1_0.5", "steps=0x10", "gain=0x10",
+                                  "steps=\u0661\u0662", "gain=1e", "steps=1e3", "steps=5.0",
+                                  "gain=..5", "q0=1_0,2"])
+def test_override_takes_plain_decimal_numbers_only(item):
+    """Python's int()/float() read ``1_0`` as 10 and other scripts' digits: a value must
+    mean what it reads, so only plain decimals parse (issue 16)."""
+    with pytest.raises(ConfigError, match="cannot parse"):
+        apply_overrides(Cfg(), [item])
+
+
+@pytest.mark.parametrize(("item", "field", "expected"),
+                         [("gain=+.5e-3", "gain", 5e-4), ("steps=+7", "steps", 7),
+                          ("q0=-7,+.5", "q0", (-7.0, 0.5)),
+                          ("gain= 2 ", "gain", 2.0), ("gain=5.", "gain", 5.0)])
+def test_plain_decimal_forms_parse(item, field, expected):
+    assert getattr(apply_overrides(Cfg(), [item]), field) == expected
+
+
 def test_override_malformed():
     with pytest.raises(ConfigError, match=r"malformed override 'gain'.*key=value"):
         apply_overrides(Cfg(), ["gain"])
