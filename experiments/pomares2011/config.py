@@ -26,7 +26,7 @@ class Pomares2011Config:
     camera_windows: bool = param(True, help="render mode: after a full frame, render only "
                                  "windows around the dots' last detections, with full-frame "
                                  "fallbacks (repro.sensors.camera_window); false: every frame "
-                                 "in full")  # ours: the same detections (<= 0.062 px on 8 of 5001 exp1 frames) 15x cheaper
+                                 "in full")  # ours: the full frame's detections (<= 0.062 px off on 8 of 5001 replayed exp1 frames) at ~1/15 of the cost; in the closed loop they perturb it like a machine's last bits (discussion.md)
     rvc_gain: float = param(0.3, unit="1/s", range=(0.01, 10.0),
                             help="lambda of the RVC law (18)")  # ours: the paper gives none; at 0.6/s the PA-10 carries the camera faster than the 3-DoF mini-robot (180 deg/s) can follow and the dots leave the image at 0.2 s
     arm_drive: str = param("position_reference", choices=("position_reference", "velocity"),

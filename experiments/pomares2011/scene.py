@@ -80,7 +80,8 @@ RVC_INTRINSICS = INTRINSICS
 #: Speed bounds of the mini-robot camera that size the rendered camera's windows
 #: (repro.sensors.camera_window.WindowPolicy.for_camera_speed): [rad/s], [m/s], nearest dot
 #: depth [m]. ours: the camera's largest speeds along the committed exp1 run, 2.27 rad/s
-#: and 0.17 m/s (a 200 fps replay of its first 0.3 s), rounded up; the dots are >= 0.21 m
+#: and 0.17 m/s (a 200 fps replay of its first 0.3 s; 1.8 rad/s and 0.17 m/s between the
+#: trace's 100 Hz rows), rounded up; the dots are >= 0.21 m
 #: from the camera along it, 0.19 m is the scene's nearest. A faster motion costs full
 #: frames ("edge", "missed"), never a different detection.
 WINDOW_OMEGA_MAX = 2.5

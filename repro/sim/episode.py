@@ -377,7 +377,7 @@ class _Runner:
         self.dist_min: dict[str, tuple[float, float]] = {}  # column -> (min [m], at t [s])
         #: per (column prefix, bodies): the distance columns and which bodies are obstacles
         self._dist_cols: dict[tuple[str, tuple[str, ...]],
-                              tuple[dict[str, str], dict[str, bool]]] = {}
+                              tuple[dict[str, str], str, dict[str, bool]]] = {}
 
     def onset(self, key: str, now: bool, t: float, k: int, kind: str, detail: str,
               end_detail: str | None = None) -> None:
@@ -475,7 +475,7 @@ class _Runner:
         for (name, robot), dists in zip(groups.items(), scene.distances_of(list(groups.values())),
                                         strict=True):
             pre = robot.column_prefix
-            cols, obstacle = self._distance_columns(pre, dists)
+            cols, col_min, obstacle = self._distance_columns(pre, dists)
             for body, d in dists.items():
                 row[cols[body]] = d
                 if d <= 0.0 and (name, body) not in self.collided:
@@ -487,11 +487,11 @@ class _Runner:
                     self.rec.event(t, k, "collision" if hit else "contact",
                                    f"{name} touches {body} (distance {d:.4f} m)")
             d_min = min([d for b, d in dists.items() if obstacle[b]], default=math.nan)
-            row[cols["min"]] = d_min
+            row[col_min] = d_min
             best_of = self.dist_min
             for body, d in dists.items():
                 self._keep_min(best_of, cols[body], d, t)
-            self._keep_min(best_of, cols["min"], d_min, t)
+            self._keep_min(best_of, col_min, d_min, t)
         if not log:
             return
         for moving in scene.moving_bodies():
@@ -500,7 +500,7 @@ class _Runner:
                 row[c] = v
 
     def _distance_columns(self, pre: str, dists: dict[str, float]
-                          ) -> tuple[dict[str, str], dict[str, bool]]:
+                          ) -> tuple[dict[str, str], str, dict[str, bool]]:
         """The distance columns of a robot (``<pre>dist_<body>``, ``<pre>dist_min``) and
         whether each body is an obstacle (a body with no robot, marked obstacle), built
         once per robot and set of bodies."""
@@ -509,9 +509,8 @@ class _Runner:
         if got is None:
             scene = self.ep.scene
             cols = {body: f"{pre}dist_{body}" for body in dists}
-            cols["min"] = f"{pre}dist_min"
             obstacle = {b: scene[b].robot is None and scene[b].obstacle for b in dists}
-            got = self._dist_cols[key] = (cols, obstacle)
+            got = self._dist_cols[key] = (cols, f"{pre}dist_min", obstacle)
         return got
 
     @staticmethod

@@ -206,7 +206,6 @@ class Scene:
         self.run_dir = Path(run_dir) if run_dir is not None else None
         self.bodies: dict[str, SceneBody] = {}
         self._others_memo: dict[tuple[int, int], list[tuple[str, list[int]]]] = {}
-        self._links_memo: dict[int, tuple[list[int], frozenset[int]]] = {}
         #: every joint group by name (:meth:`add_joint_group`); the runner logs the groups no
         #: drive covers (positions, velocities, ground-truth distances)
         self.joint_groups: dict[str, JointGroup] = {}
@@ -506,7 +505,8 @@ class Scene:
         out = []
         for robot in robots:
             full = getattr(robot, "robot", robot)  # a JointGroup's whole chain
-            own = self._own_links(robot)
+            links = getattr(robot, "links", None)  # a joint group's own links; None: all
+            own = None if links is None else frozenset(links)
             dists = {}
             for name, ids in self._others(full):
                 d = max_distance
@@ -526,16 +526,6 @@ class Scene:
                 dists[name] = float(d)
             out.append(dists)
         return out
-
-    def _own_links(self, robot: JointSet) -> frozenset[int] | None:
-        """The PyBullet links a joint group moves (None: a whole robot, every link)."""
-        links = getattr(robot, "links", None)
-        if links is None:
-            return None
-        got = self._links_memo.get(id(robot))
-        if got is None or got[0] is not links:
-            got = self._links_memo[id(robot)] = (links, frozenset(links))
-        return got[1]
 
     def _others(self, full: JointSet) -> list[tuple[str, list[int]]]:
         """(name, PyBullet ids) of every body with a collision shape but ``full`` (kept until
