@@ -53,19 +53,26 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 # --------------------------------------------------------------------------- parser
 
 
+def _path(text: str) -> Path:
+    """An argparse path that is not empty (``Path("")`` would be the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path; give a folder or file name")
+    return Path(text)
+
+
 def _add_global_options(parser: argparse.ArgumentParser, *, top_level: bool) -> None:
     # Sub-parsers use SUPPRESS so an option given before the subcommand is not
     # reset to its default by the sub-parser.
     parser.add_argument(
         "--results",
-        type=Path,
+        type=_path,
         metavar="DIR",
         default=DEFAULT_RESULTS if top_level else argparse.SUPPRESS,
         help="results directory (default: ./results)",
     )
     parser.add_argument(
         "--figures",
-        type=Path,
+        type=_path,
         metavar="DIR",
         default=DEFAULT_FIGURES if top_level else argparse.SUPPRESS,
         help="figures directory (default: ./figures)",
@@ -100,7 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--video", action="store_true", help="record a video (sets video=True)")
     p.add_argument(
         "--out",
-        type=Path,
+        type=_path,
         metavar="DIR",
         default=None,
         help="output directory (default: <results>/<paper>/<name>, "
@@ -135,7 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("report", help="render REPORT.md")
     _add_global_options(p, top_level=False)
     p.add_argument(
-        "--output", type=Path, metavar="FILE", default=DEFAULT_REPORT, help="(default: REPORT.md)"
+        "--output", type=_path, metavar="FILE", default=DEFAULT_REPORT, help="(default: REPORT.md)"
     )
     p.set_defaults(func=_cmd_report)
     return parser
@@ -243,6 +250,54 @@ def _interrupted(fired: list[int], out_dir: Path, since: float) -> int:
     return 128 + signum
 
 
+def check_dir_arg(path: Path, option: str, must_exist: bool = False) -> None:
+    """Refuse a folder argument that cannot be one, before anything is written: empty, a
+    file (or below one), missing when it must exist, or not writable where it would be
+    made. Raises :class:`ConfigError` with one line naming ``option``."""
+    if str(path) == "":
+        raise ConfigError(f"{option} is empty: give a folder")
+    probe = Path(path)
+    if probe.exists() and not probe.is_dir():
+        raise ConfigError(f"{option} {path} is a file, not a folder")
+    for parent in probe.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ConfigError(f"{option} {path}: {parent} is a file, not a folder")
+            break
+    if not probe.exists():
+        if must_exist:
+            raise ConfigError(f"{option} {path} does not exist")
+        existing = next((q for q in probe.parents if q.exists()), Path("."))
+        if not os.access(existing, os.W_OK | os.X_OK):
+            raise ConfigError(f"{option} {path} cannot be created: {existing} is not writable")
+    elif not must_exist and not os.access(probe, os.W_OK | os.X_OK):
+        raise ConfigError(f"{option} {path} is not writable")
+
+
+def make_dir(path: Path, option: str) -> None:
+    """``mkdir -p path``, or a one-line :class:`ConfigError` naming ``option``."""
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"{option} {path} cannot be created: {exc.strerror or exc}") from exc
+
+
+def check_run_location(out_dir: Path, results_dir: Path, papers: Mapping[str, Paper]) -> None:
+    """Refuse an ``--out`` where no run belongs: the results folder itself, a paper's folder
+    in it, a folder inside another run, or a folder that holds runs."""
+    target = Path(out_dir).resolve()
+    root = Path(results_dir).resolve()
+    if target == root or (target.parent == root and target.name in papers):
+        raise ConfigError(f"--out {out_dir} is a results folder that holds runs, not a run "
+                          "folder: give a folder of its own (e.g. <results>/<paper>/<name>)")
+    for parent in target.parents:
+        if (parent / registry.MANIFEST_NAME).is_file():
+            raise ConfigError(f"--out {out_dir} is inside the run folder {parent}: give a "
+                              "folder of its own")
+    if target.is_dir() and any(target.glob(f"*/{registry.MANIFEST_NAME}")):
+        raise ConfigError(f"--out {out_dir} holds other runs: give a folder of its own")
+
+
 def _registered_run(papers: Mapping[str, Paper], results_dir: Path, path: Path) -> str | None:
     """The id of the experiment whose default folder ``path`` is, if any."""
     target = path.resolve()
@@ -324,13 +379,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
     exp = registry.find_experiment(papers, args.experiment)
     # Validate everything before creating anything.
     config = prepare_config(exp, args.overrides, video=args.video)
+    check_dir_arg(args.results, "--results")
     if args.out is not None:
         out_dir = args.out
+        check_dir_arg(out_dir, "--out")
+        check_run_location(out_dir, args.results, papers)
         if not args.force:
             check_out_dir(exp, config, out_dir, papers, args.results)
     else:
         out_dir = default_out_dir(exp, args.results, config)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    running = _running_elsewhere(out_dir)
+    if running is not None:
+        raise ConfigError(f"{out_dir} is being written by another run ({running}); wait for "
+                          "it or choose another --out")
+    make_dir(out_dir, "--out" if args.out is not None else "--results")
     print(f"running {exp.id} -> {out_dir}", file=sys.stderr)
     result = _run_interruptible(exp, config, out_dir)
     if isinstance(result, int):
@@ -393,7 +455,7 @@ def _run_todo_parallel(todo: Sequence[tuple[Experiment, Any, str]], results: Pat
 
     out_dirs = [registry.experiment_dir(results, exp) for exp, _, _ in todo]
     for d in out_dirs:
-        d.mkdir(parents=True, exist_ok=True)
+        make_dir(d, "--results")
 
     def one(i: int) -> Path | int:
         exp, config, _ = todo[i]
@@ -418,6 +480,7 @@ def _run_todo_parallel(todo: Sequence[tuple[Experiment, Any, str]], results: Pat
 
 def _cmd_results(args: argparse.Namespace) -> int:
     papers = _select_papers(registry.load_papers(), args.paper)
+    check_dir_arg(args.results, "--results")
     fixed = _fix_dead_runs(papers, args.results)
     todo: list[tuple[Experiment, Any, str]] = []
     fresh: list[tuple[Experiment, str]] = []
@@ -460,7 +523,7 @@ def _cmd_results(args: argparse.Namespace) -> int:
         for exp, config, reason in todo:
             bar.set_postfix_str(exp.id)
             out_dir = registry.experiment_dir(args.results, exp)
-            out_dir.mkdir(parents=True, exist_ok=True)
+            make_dir(out_dir, "--results")
             path = _run_interruptible(exp, config, out_dir)
             if isinstance(path, int):
                 return path
@@ -488,14 +551,22 @@ def _cmd_figures(args: argparse.Namespace) -> int:
     papers = _select_papers(registry.load_papers(), args.paper)
     results_dir: Path = args.results
     figures_dir: Path = args.figures
+    check_dir_arg(results_dir, "--results", must_exist=True)
+    check_dir_arg(figures_dir, "--figures")
     drew_any = False
+    code = 0
     for paper in papers.values():
         if paper.figures is None:
             print(f"{paper.key}: no figures")
             continue
-        figures_dir.mkdir(parents=True, exist_ok=True)
-        for path in paper.figures(results_dir, figures_dir) or []:
-            print(f"{paper.key}: wrote {path}")
+        make_dir(figures_dir, "--figures")
+        try:
+            for path in paper.figures(results_dir, figures_dir) or []:
+                print(f"{paper.key}: wrote {path}")
+        except Exception as exc:  # one paper's broken figure must not hide the others
+            print(f"repro: error: {paper.key} figures failed: {type(exc).__name__}: "
+                  f"{_first_line(str(exc))}", file=sys.stderr)
+            code = 1
         drew_any = True
 
     claims = [c for paper in papers.values() if paper.claims is not None for c in paper.claims()]
@@ -511,7 +582,7 @@ def _cmd_figures(args: argparse.Namespace) -> int:
         print(f"wrote {len(claims)} claims to {csv_path}")
     elif not drew_any:
         print("no paper has figures or claims")
-    return 0
+    return code
 
 
 def source_paths() -> list[Path]:
@@ -529,6 +600,11 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from repro.runs.report import render_report
 
     root = Path(__file__).resolve().parent.parent
+    check_dir_arg(args.results, "--results", must_exist=True)
+    out = Path(args.output)
+    if out.is_dir():
+        raise ConfigError(f"--output {out} is a folder; give the report's file name")
+    check_dir_arg(out.parent if str(out.parent) else Path("."), "--output's folder")
     notes = {key: root / "experiments" / key / "discussion.md" for key in registry.load_papers()}
     result = render_report(args.results, args.figures, source_paths(), args.output, notes=notes)
     print(f"wrote {result if result is not None else args.output}")

@@ -23,6 +23,7 @@ from repro.runs.claims import (
     run_extent,
     write_claims_csv,
 )
+from repro.runs.columns import COLUMNS_FILE, Columns
 from repro.runs.registry import Experiment, Paper
 from repro.runs.trace import RunFiles, TraceRecorder
 
@@ -50,6 +51,7 @@ def _write_run(results: Path, paper: str, run: str, errors: list[float], crash: 
     rec = TraceRecorder(
         results / paper / run, experiment=run, paper=paper, config=config or Cfg(), seed=0
     )
+    rec.set_scene({"format": "test/1", "bodies": []})
     for k, err in enumerate(errors):
         rec.record({"t": 0.01 * k, "step": k, "err_m": err})
     rec.summary["sim_time_s"] = 0.01 * (len(errors) - 1) if sim_time is None else sim_time
@@ -58,6 +60,8 @@ def _write_run(results: Path, paper: str, run: str, errors: list[float], crash: 
         rec.close(status="crashed", reason="RuntimeError: boom")
     else:
         rec.close()
+    Columns().add("t", "s", "time").add("step", "-", "step").add("err_m", "m", "error").write(
+        results / paper / run / COLUMNS_FILE, ["t", "step", "err_m"])
 
 
 def _max_err_below(run: str, bound_m: float):

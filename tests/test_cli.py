@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from runfiles import write_whole_run
 
 from repro import cli
 from repro.config import param
@@ -54,7 +55,7 @@ class Runner:
             "status": self.status,
             "config_hash": registry.compute_config_hash(config),
         }
-        (out_dir / "manifest.json").write_text(json.dumps(manifest))
+        write_whole_run(out_dir, **manifest)
         return out_dir
 
 
@@ -165,8 +166,7 @@ def test_load_papers_rejects_wrong_object_and_key(monkeypatch, runners):
 
 def _write_manifest(results: Path, exp: Experiment, **fields: Any) -> None:
     out = results / exp.paper / exp.name
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "manifest.json").write_text(json.dumps(fields))
+    write_whole_run(out, **fields)
 
 
 def test_is_stale(tmp_path, papers):
@@ -406,6 +406,9 @@ def test_figures_and_claims(monkeypatch, papers, tmp_path, capsys):
     monkeypatch.setitem(sys.modules, "repro.runs.claims", fake_claims)
 
     res, fig = tmp_path / "res", tmp_path / "fig"
+    assert cli.main(["--results", str(res), "--figures", str(fig), "figures"]) == 2
+    assert "--results" in capsys.readouterr().err and not res.exists()  # nothing written
+    res.mkdir()
     assert cli.main(["--results", str(res), "--figures", str(fig), "figures"]) == 0
     assert figure_calls == [(res, fig)]
     assert seen["evaluate"] == (["claim-a", "claim-b"], res)
@@ -431,6 +434,10 @@ def test_report(monkeypatch, tmp_path):
     fake_report.render_report = render_report
     monkeypatch.setitem(sys.modules, "repro.runs.report", fake_report)
     monkeypatch.chdir(tmp_path)
+    assert cli.main(["report", "--results", "r", "--figures", "f"]) == 2  # no results folder
+    (tmp_path / "r").mkdir()
+    assert cli.main(["report", "--results", "r", "--figures", "f", "--output", "r"]) == 2
+    assert not list((tmp_path / "r").iterdir())  # no results.tmp left behind
     assert cli.main(["report", "--results", "r", "--figures", "f"]) == 0
     results_dir, figures_dir, sources, output = seen["args"]
     assert (results_dir, figures_dir, output) == (Path("r"), Path("f"), Path("REPORT.md"))
@@ -617,3 +624,65 @@ def test_jobs_takes_a_plain_whole_number(tmp_path: Path, jobs: str, capsys) -> N
     assert cli.main(["--results", str(tmp_path / "r"), "results", "-j", jobs]) == 2
     assert "-j/--jobs" in capsys.readouterr().err
     assert not (tmp_path / "r").exists()
+
+
+# --------------------------------------------------------------------------- issue 16: paths
+
+
+def _snapshot(root: Path) -> set[str]:
+    return {str(p.relative_to(root)) for p in root.rglob("*")}
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["run", "fake.case1", "--out", "README.md"], "is a file, not a folder"),
+    (["run", "fake.case1", "--out", "README.md/sub"], "README.md is a file"),
+    (["run", "fake.case1", "--out", ""], "an empty path"),
+    (["run", "fake.case1", "--out", "results"], "holds runs, not a run folder"),
+    (["run", "fake.case1", "--out", "results/fake"], "holds runs, not a run folder"),
+    (["run", "fake.case1", "--out", "results/fake/case2/sub"], "inside the run folder"),
+    (["run", "fake.case1", "--out", "runs"], "holds other runs"),
+    (["--results", "README.md", "results"], "is a file, not a folder"),
+    (["--results", "README.md", "run", "fake.case1"], "is a file, not a folder"),
+    (["--figures", "README.md", "figures"], "is a file, not a folder"),
+    (["--results", "nonexistent", "figures"], "does not exist"),
+    (["report", "--output", "results"], "is a folder"),
+    (["--results", "", "results"], "an empty path"),
+])
+def test_bad_paths_are_refused_in_one_line_before_anything_is_written(
+        papers, runners, tmp_path, monkeypatch, capsys, argv, message):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "README.md").write_text("a file\n")
+    write_whole_run(tmp_path / "results" / "fake" / "case2", status="completed",
+                    experiment="case2", paper="fake", config_hash="x")
+    write_whole_run(tmp_path / "runs" / "a", status="completed", config_hash="x")
+    before = _snapshot(tmp_path)
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err, err
+    assert len(err.strip().splitlines()) == 1 or "usage:" in err, err  # argparse: usage too
+    assert "Traceback" not in err
+    assert _snapshot(tmp_path) == before
+    assert all(not r.calls for r in runners.values())
+
+
+def test_an_unwritable_out_is_one_line(papers, runners, tmp_path, monkeypatch, capsys):
+    def refuse(self, *a, **k):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(Path, "mkdir", refuse)
+    assert cli.main(["run", "fake.case1", "--out", str(tmp_path / "x" / "y")]) == 2
+    err = capsys.readouterr().err
+    assert "cannot be created: Permission denied" in err and "Traceback" not in err
+    assert runners["fake.case1"].calls == []
+
+
+def test_run_refuses_a_folder_a_live_run_is_writing(papers, runners, tmp_path, capsys):
+    import socket
+
+    out = tmp_path / "live"
+    write_whole_run(out, status="running", pid=os.getpid(), hostname=socket.gethostname(),
+                    experiment="case1", paper="fake",
+                    config_hash=registry.compute_config_hash(FakeCfg()))
+    assert cli.main(["run", "fake.case1", "--out", str(out), "--force"]) == 2
+    assert "being written by another run" in capsys.readouterr().err
+    assert runners["fake.case1"].calls == []

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from runfiles import complete_run_files
 from test_cli import FakeCfg, NoVideoCfg
 
 from repro import cli
@@ -32,7 +33,9 @@ def _run(paper: str, kill: bool = False):  # type: ignore[no-untyped-def]
         rec.flush()
         if kill:
             os.kill(os.getpid(), signal.SIGKILL)
-        return rec.close()
+        done = rec.close()
+        complete_run_files(out_dir)
+        return done
     return run
 
 

@@ -13,6 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 import pytest  # noqa: E402
+from runfiles import complete_run_files
 
 from repro.plots.style import apply_style, save_figure  # noqa: E402
 from repro.runs.claims import CLAIMS_COLUMNS, write_claims_csv  # noqa: E402
@@ -47,6 +48,7 @@ def _make_tree(root: Path) -> dict[str, Path]:
         for k in range(4):
             rec.record({"t": 0.1 * k, "err_m": 0.01 / (k + 1)})
         rec.close(status=status, reason="RuntimeError: boom" if status == "crashed" else "")
+        complete_run_files(results / "alpha2024" / run)
     rows = [
         ("alpha2024", "1", "error converges", "< 5 mm", "3.1 mm", "reproduced"),
         ("alpha2024", "2", "avoids obstacle", "no contact", "run 'avoid' crashed", "not_run"),

@@ -52,6 +52,6 @@ def declare_columns(human: bool = False) -> Columns:
                  "mini_capsules) at the measured q")
         cols.add("dist_true_m", "m", "audit: the same distance with the true skeleton "
                  "(no tracking noise)", audit=True)
-        cols.add("dist_pair", "-", "closest pair of dist_m: <mini-robot capsule>|<human "
+        cols.add("dist_pair", "text", "closest pair of dist_m: <mini-robot capsule>|<human "
                  "capsule>")
     return cols

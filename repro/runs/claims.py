@@ -31,7 +31,8 @@ import pandas as pd
 
 from repro.errors import ConfigError, ReproError, UnknownChoiceError
 from repro.runs.registry import Paper, compute_config_hash, load_papers
-from repro.runs.trace import RunFiles, effective_manifest, load_run
+from repro.runs.trace import RunFiles
+from repro.runs.validate import DamagedRun, load_valid_run
 
 __all__ = [
     "CLAIMS_COLUMNS",
@@ -245,16 +246,12 @@ def _load_runs(
                 cache[run_dir] = f"run {name!r} missing ({run_dir} does not exist)"
             else:
                 try:
-                    cache[run_dir] = load_run(run_dir)
-                except ReproError as exc:
-                    cache[run_dir] = f"run {name!r} unreadable: {exc}"
+                    cache[run_dir] = load_valid_run(run_dir)
+                except DamagedRun as exc:  # names the folder and the first failing rule
+                    cache[run_dir] = f"run {name!r} not usable: {exc}"
         loaded = cache[run_dir]
         if isinstance(loaded, str):
             return loaded
-        status = effective_manifest(run_dir, loaded.manifest).get("status")
-        if status != "completed":
-            reason = loaded.manifest.get("reason") or "no reason recorded"
-            return f"run {name!r} did not complete (status {status!r}: {reason})"
         try:  # load_papers() raises ReproError too if an entry point is broken
             expected = _default_hash(papers(), claim.paper, name)
         except ReproError as exc:

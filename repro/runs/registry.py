@@ -263,8 +263,9 @@ def is_stale(exp: Experiment, results_dir: Path, config: Any) -> tuple[bool, str
     """Whether ``exp``'s trace under ``results_dir`` must be (re)made for ``config``.
 
     Stale if ``<results_dir>/<paper>/<name>/manifest.json`` is missing or
-    unreadable, its ``status`` is not ``"completed"``, or its ``config_hash``
-    differs from the hash of ``config``. Returns ``(stale, reason)``.
+    unreadable, its ``status`` is not ``"completed"``, its ``config_hash``
+    differs from the hash of ``config``, or the folder fails a rule of
+    :func:`repro.runs.validate.check_run`. Returns ``(stale, reason)``.
     """
     manifest_path = experiment_dir(results_dir, exp) / MANIFEST_NAME
     if not manifest_path.is_file():
@@ -282,6 +283,12 @@ def is_stale(exp: Experiment, results_dir: Path, config: Any) -> tuple[bool, str
     expected = compute_config_hash(config)
     if recorded != expected:
         return True, f"config changed (manifest hash {recorded!r}, current {expected!r})"
+    from repro.runs.validate import DamagedRun, check_run
+
+    try:  # a damaged folder (cut trace, wrong row count...) is remade, not called fresh
+        check_run(manifest_path.parent)
+    except DamagedRun as exc:
+        return True, exc.rule
     return False, f"fresh (completed, config hash {expected[:12]})"
 
 

@@ -24,6 +24,7 @@ import pandas as pd
 from repro.errors import ReproError
 from repro.runs.claims import STATUSES, natural_key, read_claims_csv
 from repro.runs.trace import TRACKED_PACKAGES, effective_manifest
+from repro.runs.validate import DamagedRun, check_run
 
 __all__ = [
     "BENCH_COLUMNS",
@@ -166,6 +167,12 @@ def _read_manifests(paper_dir: Path) -> list[tuple[str, dict[str, Any]]]:
             manifest = effective_manifest(manifest_path.parent, manifest)
         except (OSError, ValueError) as exc:
             manifest = {"status": "unreadable manifest", "reason": str(exc)}
+        else:
+            if manifest.get("status") == "completed":
+                try:  # a completed run whose files fail a rule is reported as damaged
+                    check_run(manifest_path.parent)
+                except DamagedRun as exc:
+                    manifest = {**manifest, "status": "damaged", "reason": exc.rule}
         runs.append((run, manifest))
     return sorted(runs, key=lambda item: natural_key(item[0]))
 

@@ -713,7 +713,8 @@ def load_run(run_dir: Path) -> RunFiles:
         if trace_path.stat().st_size == 0:
             trace = pd.DataFrame(columns=list(manifest.get("columns") or ()))
         else:
-            trace = pd.read_csv(trace_path, **_read_csv_kwargs())
+            # low_memory=False: a column's type inferred from the whole file, not per chunk
+            trace = pd.read_csv(trace_path, low_memory=False, **_read_csv_kwargs())
         events = pd.read_csv(
             run_dir / "events.csv",
             dtype={"kind": str, "detail": str},
@@ -740,10 +741,20 @@ def add_vector(row: dict[str, Any], name: str, values: Any) -> None:
 
 
 def load_run_if_present(base: Path, name: str) -> RunFiles | None:
-    """``load_run(base / name)`` if that run has a manifest, else None (figures draw what
-    exists)."""
+    """The run ``base / name`` validated (:func:`repro.runs.validate.load_valid_run`) if it
+    has a manifest, else None: figures draw what exists and is whole. A damaged or
+    unfinished run is skipped with one line on stderr naming its folder and the rule it
+    fails."""
+    from repro.runs.validate import DamagedRun, load_valid_run
+
     path = Path(base) / name
-    return load_run(path) if (path / "manifest.json").exists() else None
+    if not (path / "manifest.json").exists():
+        return None
+    try:
+        return load_valid_run(path)
+    except DamagedRun as exc:
+        print(f"figures: skipping {exc}", file=sys.stderr)
+        return None
 
 
 # --------------------------------------------------------------------------- dead runs
