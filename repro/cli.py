@@ -27,9 +27,8 @@ import re
 import signal
 import sys
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 from tqdm import tqdm
@@ -38,6 +37,7 @@ from repro.config import apply_overrides, config_keys, describe
 from repro.errors import ConfigError, ReproError, UnknownChoiceError
 from repro.runs import registry
 from repro.runs.registry import Experiment, Paper
+from repro.runs.signals import stop_on_signals
 
 __all__ = ["main", "build_parser"]
 
@@ -47,7 +47,6 @@ DEFAULT_REPORT = Path("REPORT.md")
 EXIT_USAGE = 2
 SHORT_HASH_LEN = 8
 #: The signals a run is closed on (status "interrupted"); exit code 128 + the signal number.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 # --------------------------------------------------------------------------- parser
@@ -214,24 +213,11 @@ def default_out_dir(exp: Experiment, results_dir: Path, config: Any) -> Path:
     return base.with_name(f"{exp.name}__{digest[:SHORT_HASH_LEN]}")
 
 
-@contextlib.contextmanager
-def _stop_on_signals(fired: list[int]) -> Iterator[None]:
-    """While active, SIGINT and SIGTERM raise ``KeyboardInterrupt(<signal name>)`` once and
-    append the signal number to ``fired``; a second signal during the unwinding is ignored, so
-    the trace and manifest are closed whole (status "interrupted", see TraceRecorder)."""
-
-    def handler(signum: int, frame: FrameType | None) -> None:
-        if fired:
-            return
-        fired.append(signum)
-        raise KeyboardInterrupt(signal.Signals(signum).name)
-
-    previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
+def _stop_on_signals(fired: list[int]) -> contextlib.AbstractContextManager[None]:
+    """:func:`repro.runs.signals.stop_on_signals`: the first SIGINT / SIGTERM raises
+    ``KeyboardInterrupt`` (never inside a native solver or a manifest write), later ones
+    are ignored, so the trace and manifest are closed whole (status "interrupted")."""
+    return stop_on_signals(fired)
 
 
 def _interrupted(fired: list[int], out_dir: Path, since: float) -> int:
@@ -416,10 +402,12 @@ def _run_interruptible(exp: Experiment, config: Any, out_dir: Path) -> Path | in
 def _fix_dead_runs(papers: Mapping[str, Paper], results_dir: Path) -> list[tuple[Path, dict]]:
     """Mark every ``running`` run under ``<results>/<paper>/*/`` whose process is gone as
     interrupted (default and override folders alike); return ``(folder, new manifest)``."""
-    from repro.runs.trace import mark_if_gone
+    from repro.runs.trace import mark_if_gone, recover_manifest_tmp
 
     fixed = []
     for paper in papers:
+        for tmp in (Path(results_dir) / paper).glob(f"*/{registry.MANIFEST_NAME}.tmp"):
+            recover_manifest_tmp(tmp.parent)
         manifests = (Path(results_dir) / paper).glob(f"*/{registry.MANIFEST_NAME}")
         for manifest_path in sorted(manifests):
             manifest = mark_if_gone(manifest_path.parent)

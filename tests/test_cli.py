@@ -686,3 +686,13 @@ def test_run_refuses_a_folder_a_live_run_is_writing(papers, runners, tmp_path, c
     assert cli.main(["run", "fake.case1", "--out", str(out), "--force"]) == 2
     assert "being written by another run" in capsys.readouterr().err
     assert runners["fake.case1"].calls == []
+
+
+def test_run_refuses_a_folder_another_process_has_locked(papers, runners, tmp_path, capsys):
+    """Two `repro run`s of one config into one folder: the second is refused in one line
+    (an flock on the folder, race-free; released when the holder ends or dies)."""
+    out = tmp_path / "run"
+    with registry.run_folder_lock(out):
+        assert cli.main(["run", "fake.case1", "--out", str(out), "--force"]) == 2
+        assert "being written by another repro process" in capsys.readouterr().err
+    assert cli.main(["run", "fake.case1", "--out", str(out), "--force"]) == 0

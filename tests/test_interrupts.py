@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import re
 import signal
 import subprocess
@@ -107,3 +108,104 @@ def test_sigkill_leaves_a_running_manifest_that_repro_results_marks_interrupted(
     assert (fixed["status"], fixed["n_rows"]) == ("interrupted", n_rows)
     assert fixed["reason"].startswith("process gone")
     assert (out / "trace.csv").read_bytes().count(b"\n") - 1 == n_rows  # trace untouched
+
+
+# --------------------------------------------------------------------------- issue 16: signals
+
+
+def _start_exp(exp: str, out: Path, results: Path) -> subprocess.Popen[str]:
+    cmd = [sys.executable, "-m", "repro", "--results", str(results), "run", exp,
+           "--set", "camera_mode=exact", "--out", str(out)]
+    return subprocess.Popen(cmd, cwd=Path(__file__).parents[1], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+@pytest.mark.parametrize("delay_s, second", [(0.0, False), (0.35, True), (0.8, False)],
+                         ids=["first-rows", "twice-50ms", "later"])
+def test_chan2011_nmpc_run_stops_between_steps_on_sigint(tmp_path, delay_s, second):
+    """CasADi (the NMPC's SQP, its kinematics functions) runs in most of a chan2011 step. A
+    KeyboardInterrupt raised inside it was swallowed (the run went on) or became a
+    SystemError / NotImplementedError (a crash); now every signal is held through the step
+    (repro.runs.signals.StepGuard) and a second one, 50 ms later, is ignored."""
+    out = tmp_path / "run"
+    proc = _start_exp("chan2011.simulation", out, tmp_path / "results")
+    _wait_for_rows(proc, out, timeout_s=60.0)
+    time.sleep(delay_s)
+    proc.send_signal(signal.SIGINT)
+    if second:
+        time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if not ln.startswith(FOREIGN)
+             and not ln.startswith("running chan2011")]
+    assert len(lines) == 1 and lines[0].startswith("repro: interrupted (SIGINT)"), err
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["status"] == "interrupted"
+    assert manifest["reason"] == "KeyboardInterrupt: SIGINT"
+    assert manifest["n_rows"] == count_trace_rows(out) > 0
+
+
+def test_repro_results_stops_on_sigterm(tmp_path):
+    """`repro results` with stale runs (one after another, and in two workers): SIGTERM
+    ends it with 143, the run it was making closed as interrupted, no other started."""
+    for jobs in ("1", "2"):
+        results = tmp_path / f"results{jobs}"
+        cmd = [sys.executable, "-m", "repro", "--results", str(results), "results",
+               "--paper", "chan2011", "-j", jobs]
+        proc = subprocess.Popen(cmd, cwd=Path(__file__).parents[1], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 60
+        while not any(count_trace_rows(d) for d in (results / "chan2011").glob("*")):
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == 143, err
+        assert "Traceback" not in err
+        statuses = [json.loads((d / "manifest.json").read_text())["status"]
+                    for d in (results / "chan2011").glob("*") if (d / "manifest.json").is_file()]
+        assert statuses and set(statuses) == {"interrupted"}, statuses
+
+
+def test_a_signal_is_held_through_a_deferred_block_and_a_step():
+    from repro.runs.signals import StepGuard, deferred, stop_on_signals
+
+    fired: list[int] = []
+    with pytest.raises(KeyboardInterrupt, match="SIGINT"), stop_on_signals(fired):
+        with deferred():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.01)
+            reached = True  # not raised inside the block
+        raise AssertionError("not reached")  # pragma: no cover
+    assert reached and fired == [signal.SIGINT]
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # ignored after a real stop
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+    fired = []
+    guard = StepGuard()
+    steps = []
+    with pytest.raises(KeyboardInterrupt), stop_on_signals(fired):
+        for k in range(5):
+            guard.step()
+            steps.append(k)
+            if k == 2:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.01)
+                steps.append("end of 2")
+    assert steps == [0, 1, 2, "end of 2"]
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def test_a_manifest_tmp_left_by_a_kill_is_recovered(tmp_path):
+    from repro.runs.trace import recover_manifest_tmp
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "manifest.json.tmp").write_text('{"status": "running", "n_rows": 0}')
+    assert recover_manifest_tmp(run)
+    assert json.loads((run / "manifest.json").read_text())["status"] == "running"
+    (run / "manifest.json.tmp").write_text('{"status": "runn')  # cut: left alone
+    assert not recover_manifest_tmp(run)

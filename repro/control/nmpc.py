@@ -95,6 +95,7 @@ import casadi as ca
 import numpy as np
 
 from repro.errors import ConfigError, UnknownChoiceError
+from repro.runs.signals import deferred
 from repro.sensors.camera import ImageBounds, Intrinsics
 
 #: Valid ``NMPCConfig.solver`` values.
@@ -441,6 +442,18 @@ class VisualNMPC:
               q_lo: np.ndarray | None = None, q_hi: np.ndarray | None = None,
               qd_lo: np.ndarray | None = None, qd_hi: np.ndarray | None = None,
               warm_start: bool = True) -> NMPCSolution:
+        """Solve the NMPC problem at step k (:meth:`_solve`). A SIGINT / SIGTERM that comes
+        while CasADi runs is held until it returns (:func:`repro.runs.signals.deferred`): a
+        KeyboardInterrupt raised inside CasADi would be swallowed or corrupt its result."""
+        with deferred():
+            return self._solve(q_k, p_d, d_k, T_base_object, points, q_lo, q_hi, qd_lo,
+                               qd_hi, warm_start)
+
+    def _solve(self, q_k: np.ndarray, p_d: np.ndarray, d_k: np.ndarray,
+               T_base_object: np.ndarray, points: np.ndarray,
+               q_lo: np.ndarray | None, q_hi: np.ndarray | None,
+               qd_lo: np.ndarray | None, qd_hi: np.ndarray | None,
+               warm_start: bool) -> NMPCSolution:
         """Solve the NMPC problem at step k.
 
         Args:

@@ -15,13 +15,15 @@ files and its ``manifest.json`` (with at least ``status`` and ``config_hash``).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import importlib
 import inspect
 import json
+import os
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -237,11 +239,40 @@ def run_experiment(exp: Experiment, config: Any, out_dir: Path) -> Path:
     out_dir = Path(out_dir)
     kwargs = {"experiment": exp.name} if _accepts_keyword(exp.run, "experiment") else {}
     started = time.time()
-    try:
-        result = exp.run(config, out_dir, **kwargs)
-    finally:
-        _name_experiment(out_dir, exp.name, since=started)
+    with run_folder_lock(out_dir):
+        try:
+            result = exp.run(config, out_dir, **kwargs)
+        finally:
+            _name_experiment(out_dir, exp.name, since=started)
     return Path(result) if result is not None else out_dir
+
+
+@contextlib.contextmanager
+def run_folder_lock(out_dir: Path) -> Iterator[None]:
+    """Hold an exclusive lock on the run folder ``out_dir`` (``flock`` on the folder itself:
+    no lock file, released by the kernel when the process dies) while a run writes it.
+
+    Raises:
+        ReproError: another process holds it (two runs of one config into one folder would
+            interleave their rows).
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: the manifest's live-writer check only
+        yield
+        return
+    fd = os.open(out_dir, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ReproError(f"{out_dir} is being written by another repro process; wait for "
+                             "it or choose another --out") from None
+        yield
+    finally:
+        os.close(fd)
 
 
 def _name_experiment(out_dir: Path, name: str, *, since: float) -> None:

@@ -65,6 +65,7 @@ __all__ = [
     "effective_manifest",
     "load_run",
     "load_run_if_present",
+    "recover_manifest_tmp",
     "mark_if_gone",
     "package_versions",
     "process_gone",
@@ -225,9 +226,34 @@ def _check_config(config: Any) -> None:
 
 
 def _write_json_atomic(path: Path, obj: Any) -> None:
+    """Write ``path`` through ``<path>.tmp`` and a rename; a SIGINT / SIGTERM is held until
+    both are done (:func:`repro.runs.signals.deferred`)."""
+    from repro.runs.signals import deferred
+
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    text = json.dumps(obj, indent=2, allow_nan=False) + "\n"
+    with deferred():
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+
+
+def recover_manifest_tmp(run_dir: Path) -> bool:
+    """A run killed (SIGKILL) between writing ``manifest.json.tmp`` and renaming it has no
+    manifest.json: put the temporary file in its place if it is a whole JSON object (it is
+    then read like any manifest, e.g. marked interrupted by :func:`mark_if_gone`); True if
+    it did."""
+    run_dir = Path(run_dir)
+    tmp, path = run_dir / "manifest.json.tmp", run_dir / "manifest.json"
+    if path.exists() or not tmp.is_file():
+        return False
+    try:
+        obj = json.loads(tmp.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    if not isinstance(obj, dict):
+        return False
     os.replace(tmp, path)
+    return True
 
 
 # --------------------------------------------------------------------------- environment
@@ -640,6 +666,12 @@ class TraceRecorder:
             return self._manifest_path
         if status not in RUN_STATUSES:
             raise UnknownChoiceError("run status", status, RUN_STATUSES)
+        from repro.runs.signals import deferred
+
+        with deferred():  # a signal while closing: the files are closed whole first
+            return self._close(status, reason)
+
+    def _close(self, status: str, reason: str) -> Path:
         self._closed = True
         wall_time_s = time.perf_counter() - self._t0
         try:

@@ -38,6 +38,7 @@ import pybullet as p
 
 from repro.errors import ConfigError
 from repro.runs.columns import COLUMNS_FILE, Columns
+from repro.runs.signals import StepGuard
 from repro.runs.trace import TraceRecorder
 from repro.sensors.camera import Camera, project_points, render_rgb
 from repro.sim.drives import Drive
@@ -362,6 +363,7 @@ def _why_missed(in_view: bool, visible: bool, c: np.ndarray, P: np.ndarray,
 class _Runner:
     def __init__(self, ep: Episode, rec: TraceRecorder, out_dir: Path) -> None:
         self.ep, self.rec, self.out_dir = ep, rec, out_dir
+        self.guard = StepGuard()  # signals are raised between steps (repro.runs.signals)
         self.cols = runner_columns(ep).extend(ep.columns)
         self.robots = {name: d.robot for name, d in ep.drives.items()}
         #: joint groups no drive commands: observed and logged only
@@ -548,6 +550,7 @@ class _Runner:
         t_start = clock()
         k = 0
         for k in range(n_steps + 1):
+            self.guard.step()  # a SIGINT / SIGTERM stops the run here, between steps
             progress.update(k)
             tic0 = clock()
             t = k * dt
@@ -635,6 +638,7 @@ class _Runner:
                     drive.substep(i, h)
                 world.step_physics()
             split["physics_s"] += clock() - tic5
+        self.guard.close()  # one held through the last step
         progress.close()
         wall = clock() - t_start
         rec.summary["timing"] = {
@@ -728,7 +732,12 @@ def run_episode(ep: Episode, out_dir: Path, *, paper: str, config: Any,
                            "last one); the loop, sensors, audit and events ran at every step"}
             desc.update(scene_extra or {})
             rec.set_scene(desc)
-            status, reason = _Runner(ep, rec, out_dir).run()
+            runner = _Runner(ep, rec, out_dir)
+            try:
+                status, reason = runner.run()
+            except BaseException:
+                runner.guard.close(raise_pending=False)  # this exception closes the run
+                raise
             rec.close(status, reason)
     finally:
         ep.scene.close()
