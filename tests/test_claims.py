@@ -123,7 +123,8 @@ def test_evaluate_claims_statuses(results: Path) -> None:
     assert measured["1"] == "max error 4.0 mm"
     assert measured["2"] == "max error 9.0 mm"
     assert "'absent'" in measured["3"] and "missing" in measured["3"]
-    assert "KeyError" in measured["4"] and "force_n" in measured["4"]
+    assert "column" in measured["4"] and "force_n" in measured["4"]
+    assert "missing from run(s) p2020/good" in measured["4"]
     assert "crashed" in measured["5"] and "boom" in measured["5"]
     assert "str" in measured["6"]
     assert df.loc[0, "description"] == "claim 1" and df.loc[0, "expected"] == "error < 5 mm"

@@ -209,3 +209,31 @@ def test_a_manifest_tmp_left_by_a_kill_is_recovered(tmp_path):
     assert json.loads((run / "manifest.json").read_text())["status"] == "running"
     (run / "manifest.json.tmp").write_text('{"status": "runn')  # cut: left alone
     assert not recover_manifest_tmp(run)
+
+
+def test_a_signal_during_the_closing_write_leaves_a_whole_manifest(tmp_path, monkeypatch):
+    """The closing manifest write is held against signals: the signal is raised once the
+    manifest says completed with every row, never between the temporary file and its
+    rename."""
+    from repro.runs import trace
+    from repro.runs.signals import stop_on_signals
+
+    rec = trace.TraceRecorder(tmp_path / "run", experiment="x", paper="p", config={"a": 1},
+                              seed=0)
+    for k in range(3):
+        rec.record({"t": 0.1 * k, "step": k})
+    real = trace.environment
+
+    def signalled() -> dict:
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.01)
+        return real()
+
+    monkeypatch.setattr(trace, "environment", signalled)
+    with pytest.raises(KeyboardInterrupt), stop_on_signals([]):
+        rec.close()
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    manifest = json.loads((tmp_path / "run" / "manifest.json").read_text())
+    assert (manifest["status"], manifest["n_rows"]) == ("completed", 3)
+    assert not (tmp_path / "run" / "manifest.json.tmp").exists()

@@ -58,6 +58,9 @@ FAULTS: dict[str, tuple[Callable[[Path], None], str]] = {
                       "not strictly increasing"),
     "NaN last row": (lambda r: _write_lines(r, _lines(r)[:-1] + [",".join(
         ["nan"] * len(_lines(r)[0].split(","))) + "\n"]), "t is not finite"),
+    "10 NaN rows": (lambda r: _write_lines(r, _lines(r)[:3] + [",".join(
+        ["nan"] * len(_lines(r)[0].split(","))) + "\n"] * 10 + _lines(r)[13:]),
+        "t is not finite at row 3"),
     "a row dropped": (lambda r: _write_lines(r, _lines(r)[:-1]), "n_rows"),
     "header only": (lambda r: _write_lines(r, _lines(r)[:1]), "n_rows"),
     "empty trace": (lambda r: (r / "trace.csv").write_text(""), "empty"),
@@ -147,6 +150,44 @@ def test_figures_skip_a_damaged_run_with_one_line(tmp_path, capsys):
     assert load_run_if_present(run.parent, run.name) is None
     err = capsys.readouterr().err
     assert "skipping damaged run" in err and "last line is cut" in err
+
+
+def test_figures_skip_an_interrupted_run(tmp_path, capsys):
+    from repro.runs.trace import load_run_if_present
+
+    run = _copy(tmp_path)
+    FAULTS["interrupted"][0](run)
+    assert load_run_if_present(run.parent, run.name) is None
+    assert "status 'interrupted'" in capsys.readouterr().err
+
+
+def test_a_column_missing_everywhere_makes_the_claim_not_run_naming_it(tmp_path):
+    """Removed from trace.csv and columns.json alike, the run is consistent; the claim
+    that needs the column is not_run, and its message names the column and the run."""
+    from repro.runs.claims import evaluate_claims
+    from repro.runs.registry import load_papers
+
+    papers = load_papers()
+    results = tmp_path / "results"
+    run = results / "thomas2024" / "case1"
+    shutil.copytree(RESULTS / "thomas2024" / "case1", run)
+    claims = [c for c in papers["thomas2024"].claims() if set(c.runs) == {"case1"}]
+    assert claims
+    before = evaluate_claims(claims, results, papers)
+    assert (before["status"] != "not_run").all()
+    lines = _lines(run)
+    names = lines[0].rstrip("\n").split(",")
+    cols = json.loads((run / "columns.json").read_text())["columns"]
+    # drop every column but the runner's own; a check reads at least one of them
+    keep = [i for i, n in enumerate(names) if n in ("t", "step")]
+    _write_lines(run, [",".join(line.rstrip("\n").split(",")[i] for i in keep) + "\n"
+                       for line in lines])
+    (run / "columns.json").write_text(json.dumps(
+        {"columns": [c for c in cols if c["name"] in ("t", "step")]}))
+    check_run(run)
+    after = evaluate_claims(claims, results, papers)
+    assert (after["status"] == "not_run").all()
+    assert after["measured"].str.contains("missing from run").all(), after["measured"]
 
 
 def test_the_report_marks_a_damaged_run(tmp_path):

@@ -300,7 +300,12 @@ def evaluate_claims(
         try:
             result = claim.check(runs)
         except Exception as exc:  # a broken check must not take the whole table down
-            rows.append(_row(claim, f"check failed: {type(exc).__name__}: {exc}", "not_run"))
+            if isinstance(exc, KeyError):  # a column the check reads is not in the trace
+                where = ", ".join(f"{claim.paper}/{r}" for r in claim.runs)
+                message = f"check failed: column {exc} missing from run(s) {where}"
+            else:
+                message = f"check failed: {type(exc).__name__}: {exc}"
+            rows.append(_row(claim, message, "not_run"))
             continue
         if not isinstance(result, ClaimResult):
             message = f"check returned {type(result).__name__}, not ClaimResult"
