@@ -170,3 +170,26 @@ def test_claim4_detects_broken_constraints() -> None:
     assert any("field of view" in b for b in cl._broken(_fake_run(0.5, lost=True)))
     res = cl.check_4({"ibvs": _fake_run(1.5, False), "ibvs_saturated": ok})
     assert res.status == "not_reproduced" and "saturator breaks a constraint" in res.measured
+
+
+def test_a_feasible_iterate_at_the_iteration_limit_is_applied(tmp_path: Path) -> None:
+    """issue 17: with the SQP cut to 1 iteration, solves stop on the limit; their last
+    iterate, when it meets every constraint within feas_tol, is commanded (an event says so,
+    with its violation), and only a step with no feasible point falls back to zero."""
+    got = short_run("simulation", tmp_path / "sim", nlp_max_iter=1)
+    df, ev = got.trace, got.events
+    limited = df["status"].str.contains("Maximum_Iterations", case=False)
+    assert limited.any()
+    used = df["nmpc_command"] == "feasible_iterate"
+    assert used.any()
+    assert (df.loc[used, "max_violation"] <= 1e-6).all()
+    u = df[[f"u{i}" for i in range(1, 7)]].to_numpy(float)
+    assert (np.abs(u[used.to_numpy()]).max(axis=1) > 0).all()  # not the zero fallback
+    zero = df["nmpc_command"] == "zero"
+    assert (np.abs(u[zero.to_numpy()]) == 0).all()
+    assert (ev["kind"] == "nmpc_feasible_iterate").sum() >= used.sum() - 1  # logged rows thin
+    assert ev.loc[ev["kind"] == "nmpc_feasible_iterate", "detail"].str.contains(
+        "max violation").all()
+    # the default limit converges: the column says so on every NMPC row
+    full = short_run("simulation", tmp_path / "full")
+    assert (full.trace["nmpc_command"] == "converged").all()

@@ -31,6 +31,10 @@ def declare_columns() -> Columns:
              "retry; the IBVS law for the baselines)")
     cols.add("cost", "-", "NMPC cost (9) at the solution")
     cols.add("max_violation", "-", "largest constraint violation at the NMPC solution")
+    cols.add("nmpc_command", "text", "what the NMPC step commanded: converged (a converged, "
+             "feasible solution), feasible_iterate (the solver stopped on its iteration limit; "
+             "its last iterate satisfies every constraint within feas_tol and is applied), "
+             "zero (no feasible point: qdot = 0); empty for the baselines")
     cols.add("dcc_free", "bool", "eq. (20) certifies the planned motion q_k -> q_{k+Np|k}")
     cols.add("dcc_checks", "-", "distance queries used by DCC at this step")
     cols.add("dcc_box", "bool", "joint bounds replaced by the collision-free hyper-rectangle")

@@ -15,7 +15,7 @@ from experiments.chan2011 import scene as sc
 from experiments.chan2011.columns import declare_columns
 from experiments.chan2011.config import Chan2011Config
 from repro.config import validate
-from repro.control.nmpc import NMPCConfig, VisualNMPC
+from repro.control.nmpc import NMPCConfig, NMPCSolution, VisualNMPC
 from repro.errors import ConfigError, ReproError
 from repro.geometry import inv_T, trans
 from repro.planning.dcc import CollisionModel, certify_segment, check_segment, free_box
@@ -69,6 +69,21 @@ def conrod_parts() -> list[Part]:
     return [Part(shape, tuple(size), trans(*centre)) for shape, size, centre in sc.CONROD_PARTS]
 
 
+
+def usable(sol: NMPCSolution) -> bool:
+    """Whether an NMPC solution may be commanded: converged and feasible, or the last
+    iterate of a solve stopped on its iteration limit that meets every constraint within
+    ``feas_tol`` (issue 17: discarding such iterates stalled variant runs for good; an
+    iterate inside the constraints is a motion the constraints allow, if not the optimal
+    one)."""
+    return sol.success or (sol.feasible and sol.iteration_limit)
+
+
+def best_iterate(*sols: NMPCSolution) -> NMPCSolution | None:
+    """The usable solution of lowest cost (eq. (12)) among ``sols``, None if none is."""
+    ok = [s for s in sols if usable(s)]
+    return min(ok, key=lambda s: s.cost) if ok else None
+
 class Chan2011Controller:
     """Image points -> NMPC (chan2011 eqs. (9)-(12)) with DCC (Sec. IV), or classical IBVS."""
 
@@ -102,7 +117,7 @@ class Chan2011Controller:
         d_k = self.nmpc.disturbance(p_k, q, s.T_object_estimate, P)  # eq. (11)
         sol = self.nmpc.solve(q, self.p_d, d_k, s.T_object_estimate, P)
         lo = hi = None
-        if self.dcc is not None and sol.success:
+        if self.dcc is not None and usable(sol):
             # Sec. IV-B: certify the planned motion with eq. (20); if it fails, bisect: the
             # first certified sub-segment [q_k, q_a] bounds a collision-free hyper-rectangle
             # that replaces the joint limits (8) in a new solve (or the box around q_k).
@@ -128,20 +143,33 @@ class Chan2011Controller:
             self.dcc_failing = not direct
         solve_s = sol.solve_time_s
         if not sol.success:  # retry once from a cold start (a stale warm start can stall)
+            first = sol
             self.nmpc.reset()
             sol = self.nmpc.solve(q, self.p_d, d_k, s.T_object_estimate, P, q_lo=lo, q_hi=hi)
             solve_s += sol.solve_time_s
             events.append(("nmpc_retry", f"cold retry: {sol.status}"))
+            if not sol.success:
+                sol = best_iterate(first, sol) or sol
         cols.update(status=sol.status, iterations=sol.iterations, solve_s=solve_s,
                     cost=sol.cost, max_violation=sol.max_violation)
-        if not sol.success:
-            events.append(("nmpc_failed", f"{sol.status}; fallback qdot = 0"))
-            return np.zeros(self.robot.n), False
-        return sol.qdot, True
+        if sol.success:
+            cols["nmpc_command"] = "converged"
+            return sol.qdot, True
+        if usable(sol):
+            cols["nmpc_command"] = "feasible_iterate"
+            events.append(("nmpc_feasible_iterate",
+                           f"{sol.status} after {sol.iterations} iterations; the last iterate "
+                           f"is feasible (max violation {sol.max_violation:.2e} <= feas_tol, "
+                           f"cost {sol.cost:.4g}): applied"))
+            return sol.qdot, True
+        cols["nmpc_command"] = "zero"
+        events.append(("nmpc_failed", f"{sol.status} (max violation {sol.max_violation:.2e}); "
+                       "no feasible iterate: fallback qdot = 0"))
+        return np.zeros(self.robot.n), False
 
     def __call__(self, obs: Observation) -> StepResult:
         q, f = obs.q["crs_a465"], obs.features["camera"]
-        cols: dict = {"dcc_free": True, "dcc_checks": 0, "dcc_box": False,
+        cols: dict = {"nmpc_command": "", "dcc_free": True, "dcc_checks": 0, "dcc_box": False,
                       "dcc_box_halfwidth": float("nan"), "d_fcl": float("nan")}
         events: list[tuple[str, str]] = []
         if not f.found.all():

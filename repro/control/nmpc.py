@@ -189,6 +189,11 @@ class NMPCSolution:
             out (u_1, v_1, ..., u_N, v_N); row 0 is the measured p_k when d_k is consistent.
         q_pred: (Np, n) predicted joint positions q_k + i dt qdot [rad].
         max_violation: largest bound violation of the returned point [mixed units].
+        feasible: the returned point is finite and within ``feas_tol`` of every bound
+            (whether or not the solver converged).
+        iteration_limit: the solver stopped on its iteration limit (``max_iter``) rather
+            than converging or failing: its last iterate may still be feasible (an
+            SQP iterate of a convex-constrained step is a valid, if suboptimal, command).
     """
 
     qdot: np.ndarray
@@ -200,6 +205,8 @@ class NMPCSolution:
     p_pred: np.ndarray
     q_pred: np.ndarray
     max_violation: float
+    feasible: bool = False
+    iteration_limit: bool = False
 
 
 @contextlib.contextmanager
@@ -530,12 +537,16 @@ class VisualNMPC:
         )
         if not np.isfinite(g_val).all():
             violation = math.inf
-        success = solver_ok and violation <= cfg.feas_tol
+        feasible = bool(violation <= cfg.feas_tol and math.isfinite(float(cost)))
+        success = solver_ok and feasible
+        # sqpmethod and IPOPT both report "Maximum_Iterations_Exceeded"
+        iteration_limit = "maximum_iterations" in status.lower()
         if np.isfinite(lam_x).all() and np.isfinite(lam_g).all() and solver_ok:
             self._warm = {"x": x.copy(), "lam_x": lam_x, "lam_g": lam_g,
                           "scale": np.array(scale)}
         return NMPCSolution(
             qdot=x, success=success, status=status, iterations=iterations,
             solve_time_s=solve_time, cost=float(cost), p_pred=np.asarray(p_pred),
-            q_pred=np.asarray(q_pred), max_violation=violation,
+            q_pred=np.asarray(q_pred), max_violation=violation, feasible=feasible,
+            iteration_limit=iteration_limit,
         )
