@@ -435,3 +435,40 @@ def test_free_box(model: CollisionModel) -> None:
 def test_free_box_in_collision_raises(model: CollisionModel) -> None:
     with pytest.raises(ReproError, match="collision"):
         free_box(model, 0.5 * (Q_SWEEP_I + Q_SWEEP_F))
+
+
+def test_links_no_joint_moves_are_left_out_of_d_so_it_is_not_capped():
+    """issue 17: the CRS-A465's fixed base sits 0.192 m from the books at every q; with it
+    in the model d(q) never exceeded that, and eq. (20) failed at the cap far from any
+    obstacle. static_links finds the base; without it d(q) follows the moving links."""
+    from experiments.chan2011 import scene as chan_scene
+    from repro.planning.dcc import static_links
+    from repro.sim.crs_a465 import CRS_JOINTS, CRS_LIMITS, crs_urdf_path
+
+    urdf = crs_urdf_path()
+    assert static_links(urdf) == ("crs_link0",)
+    full = CollisionModel(urdf, CRS_JOINTS, chan_scene.OBSTACLES)
+    moving = CollisionModel(urdf, CRS_JOINTS, chan_scene.OBSTACLES,
+                            skip_links=static_links(urdf))
+    rng = np.random.default_rng(1)
+    lo, hi = np.asarray(CRS_LIMITS.q_min), np.asarray(CRS_LIMITS.q_max)
+    qs = rng.uniform(lo, hi, size=(200, len(lo)))
+    d_full = np.array([full.distance(q) for q in qs])
+    d_moving = np.array([moving.distance(q) for q in qs])
+    assert d_full.max() <= 0.1925  # the base's cap
+    assert d_moving.max() > 0.2
+    assert (d_moving >= d_full - 1e-12).all()  # fewer links: never closer
+    assert (d_moving > d_full + 1e-6).mean() > 0.5
+
+
+def test_static_links_of_a_chain_with_a_fixed_root_group(tmp_path):
+    from repro.planning.dcc import static_links
+
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(
+        '<robot name="r"><link name="a"/><link name="b"/><link name="c"/><link name="d"/>'
+        '<joint name="ab" type="fixed"><parent link="a"/><child link="b"/></joint>'
+        '<joint name="bc" type="revolute"><parent link="b"/><child link="c"/>'
+        '<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+        '<joint name="cd" type="fixed"><parent link="c"/><child link="d"/></joint></robot>')
+    assert static_links(urdf) == ("a", "b")

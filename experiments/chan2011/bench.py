@@ -13,7 +13,7 @@ import pinocchio as pin
 from experiments.chan2011 import scene as sc
 from repro.bench import timing_row
 from repro.control.nmpc import NMPCConfig, VisualNMPC
-from repro.planning.dcc import CollisionModel
+from repro.planning.dcc import CollisionModel, static_links
 from repro.sim.casadi_kinematics import frame_pose_casadi
 from repro.sim.crs_a465 import (
     CRS_JOINTS,
@@ -61,7 +61,8 @@ def bench(results_dir: Path) -> list[dict[str, object]]:
                 sol = nmpc.solve(q, p_d, d_k, setting.T_object_estimate, sc.CONROD_POINTS)
                 times.append(sol.solve_time_s)
             rows.append(timing_row(f"nmpc_solve[Np={Np},{mode}]", times))
-    dcc = CollisionModel(crs_urdf_path(), CRS_JOINTS, sc.OBSTACLES)
+    dcc = CollisionModel(crs_urdf_path(), CRS_JOINTS, sc.OBSTACLES,
+                         skip_links=static_links(crs_urdf_path()))
     rng = np.random.default_rng(0)
     qs = rng.uniform(np.asarray(CRS_LIMITS.q_min), np.asarray(CRS_LIMITS.q_max), (300, 6))
     t = []

@@ -16,7 +16,13 @@ import numpy as np
 
 from experiments.chan2011 import scene as sc
 from repro.config import param, validate
-from repro.planning.dcc import CollisionModel, certify_segment, check_segment, swept_bound
+from repro.planning.dcc import (
+    CollisionModel,
+    certify_segment,
+    check_segment,
+    static_links,
+    swept_bound,
+)
 from repro.runs.columns import COLUMNS_FILE, Columns
 from repro.runs.trace import TraceRecorder
 from repro.sim.crs_a465 import CRS_JOINTS, CRS_LIMITS, crs_urdf_path
@@ -68,14 +74,15 @@ def run(config: DCCAuditConfig, out_dir: Path, experiment: str | None = None) ->
         scene.add_urdf("crs_a465", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
         for box in sc.OBSTACLES:
             scene.add_box(box.name, box.size, box.T_world, sc.OBSTACLE_RGBA)
-        model = CollisionModel(crs_urdf_path(), CRS_JOINTS, sc.OBSTACLES)
+        skip = static_links(crs_urdf_path())  # as the controller's model (run.py)
+        model = CollisionModel(crs_urdf_path(), CRS_JOINTS, sc.OBSTACLES, skip_links=skip)
         r = model.radii()
         desc = scene.describe()
         robot = next(b for b in desc["bodies"] if b["kind"] == "urdf")
         robot["q_columns"] = []  # no time axis: joints are the qi*/qf* columns of a segment
         rec.set_scene({**desc, "dcc_radii_r_j": r, "columns_file": COLUMNS_FILE,
                        "dcc_model": {"library": "python-fcl", "margin": model.margin,
-                                     "skip_links": [], "note": "d_i, d_f, dense_min_distance "
+                                     "skip_links": list(skip), "note": "d_i, d_f, dense_min_distance "
                                      "are python-fcl distances on the URDF's collision "
                                      "primitives; PyBullet's differ by ~1 mm"},
                        "note": "no time axis: one trace row per random joint-space segment "

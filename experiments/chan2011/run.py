@@ -18,7 +18,13 @@ from repro.config import validate
 from repro.control.nmpc import NMPCConfig, NMPCSolution, VisualNMPC
 from repro.errors import ConfigError, ReproError
 from repro.geometry import inv_T, trans
-from repro.planning.dcc import CollisionModel, certify_segment, check_segment, free_box
+from repro.planning.dcc import (
+    CollisionModel,
+    certify_segment,
+    check_segment,
+    free_box,
+    static_links,
+)
 from repro.sensors.camera import Camera, check_scene_colors, project_points
 from repro.sim.casadi_kinematics import frame_pose_casadi
 from repro.sim.crs_a465 import (
@@ -236,7 +242,11 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
                                              W_weight=config.W_weight, solver=config.nlp_solver,
                                              qpsol=config.qpsol, max_iter=config.nlp_max_iter),
                           image_bounds=sc.CONTROLLER_IMAGE_BOUNDS)
-    dcc = CollisionModel(robot.urdf_path, CRS_JOINTS, setting.obstacles) if config.dcc else None
+    # issue 17: the links no joint moves (the base) are left out of d(q); their fixed
+    # 0.19 m to the books capped d(q) at every configuration (the ground-truth audit keeps them)
+    skip = static_links(robot.urdf_path)
+    dcc = (CollisionModel(robot.urdf_path, CRS_JOINTS, setting.obstacles, skip_links=skip)
+           if config.dcc else None)
     robot.reset(np.deg2rad(setting.q0_deg))
     ctrl = Chan2011Controller(config, robot, setting, uv_d.ravel(), nmpc, dcc)
     scene.extra.update(
@@ -244,7 +254,12 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
         controller_model={"table_I": sc.TABLE_I, "T_flange_camera": T_FLANGE_CAMERA,
                           "T_base_object_estimate": setting.T_object_estimate,
                           "qd_max_used": qd_max},
-        dcc_radii=dcc.radii() if dcc is not None else None)
+        dcc_radii=dcc.radii() if dcc is not None else None,
+        dcc_model=None if dcc is None else {
+            "library": "python-fcl", "margin": dcc.margin, "skip_links": list(skip),
+            "skip_reason": "links no joint moves (the root link and links fixed to it): "
+                           "their distance to the obstacles is the same at every q, so in "
+                           "d(q) it is only a cap; the *_dist_* audit columns keep them"})
     return Episode(scene, {"crs_a465": PositionReferenceDrive(robot, config.inner_loop,
                                                               config.pd_gain)},
                    ctrl, declare_columns(), config.duration, cameras=[rig], video=config.video,

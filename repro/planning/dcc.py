@@ -245,6 +245,34 @@ def _fcl_transform(T: np.ndarray) -> fcl.Transform:
     return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
 
 
+def static_links(urdf_path: Path) -> tuple[str, ...]:
+    """The links of a fixed-base URDF that no joint moves: the root link and every link
+    attached to it through fixed joints only (chan2011: the CRS-A465's base).
+
+    Their distance to the obstacles is the same at every configuration, so in ``d(q)`` it
+    is only a cap: the CRS base's 0.192 m made eq. (20) fail at that distance at every
+    configuration, far from any obstacle (issue 17). Leave them out with ``skip_links``;
+    the ground-truth audit still measures them."""
+    root_el = ET.parse(urdf_path).getroot()
+    links = [lk.get("name", "") for lk in root_el.findall("link")]
+    joints = [(j.get("type", ""), j.find("parent"), j.find("child"))
+              for j in root_el.findall("joint")]
+    children = {c.get("link", "") for _, _, c in joints if c is not None}
+    roots = [lk for lk in links if lk not in children]
+    if len(roots) != 1:
+        raise ConfigError(f"{urdf_path}: expected one root link, found {roots}")
+    static = [roots[0]]
+    grew = True
+    while grew:
+        grew = False
+        for kind, parent, child in joints:
+            if (kind == "fixed" and parent is not None and child is not None
+                    and parent.get("link") in static and child.get("link") not in static):
+                static.append(child.get("link", ""))
+                grew = True
+    return tuple(static)
+
+
 class CollisionModel:
     """python-fcl geometry of a robot, read from the collision primitives (box, cylinder,
     sphere) of its URDF, posed by pinocchio forward kinematics of the same URDF.
@@ -257,7 +285,9 @@ class CollisionModel:
         T_world_base: pose of the URDF root link in the world (default identity).
         skip_links: links whose geometry is ignored, both in ``d(q)`` and in ``r_j``
             (e.g. a base that rests on a table obstacle). Their motion does not matter
-            because they are never checked against the obstacles.
+            because they are never checked against the obstacles. chan2011 skips
+            :func:`static_links`, the links no joint moves: their fixed distance would cap
+            ``d(q)``.
         margin: safety padding [m] subtracted from every distance (0: the bare geometry).
 
     Links attached by fixed joints (camera, gripper) move with the link of the last
