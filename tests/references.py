@@ -113,6 +113,10 @@ GAINS = {
     "thomas2024": ("lambda_4p",),  # the IBVS gain of the QP cost
     "chan2011/nmpc": ("W_weight",),  # the NMPC's velocity weight (only W/Q matters)
     "chan2011/ibvs": ("ibvs_gain",),
+    # the scaling saturator commands the velocity limit at every step of the short run:
+    # the gain only sets a magnitude the saturator replaces, so it cannot reach the trace
+    # (the Jacobian sign and the one-step delay still must)
+    "chan2011/ibvs_saturated": (),
     "chan2011/dcc_audit": ("max_step",),  # no loop: the largest joint change of a segment
     "pomares2011": ("rvc_gain", "omega_max"),  # the PA-10's RVC law, the mini-robot's loop
     "pomares2011/exp1_indirect": ("rvc_gain", "indirect_gain"),
@@ -123,7 +127,8 @@ GAINS = {
 def _gains(paper: str, name: str) -> tuple[str, ...]:
     """The :data:`GAINS` entry of experiment ``name`` of ``paper``."""
     if paper == "chan2011":
-        key = name if name == "dcc_audit" else ("ibvs" if name.startswith("ibvs") else "nmpc")
+        key = name if name in ("dcc_audit", "ibvs_saturated") else (
+            "ibvs" if name.startswith("ibvs") else "nmpc")
         return GAINS[f"chan2011/{key}"]
     if name.startswith("exp3"):
         return GAINS["pomares2011/exp3"]

@@ -193,3 +193,25 @@ def test_a_feasible_iterate_at_the_iteration_limit_is_applied(tmp_path: Path) ->
     # the default limit converges: the column says so on every NMPC row
     full = short_run("simulation", tmp_path / "full")
     assert (full.trace["nmpc_command"] == "converged").all()
+
+
+def test_the_two_ibvs_baselines_are_different_runs(tmp_path: Path) -> None:
+    """issue 17: with a per-joint clip the saturated baseline was the plain one again (the
+    drive clips each joint anyway). The saturator now scales the command into the limits:
+    within the limits, parallel to the plain IBVS command, and the joints move otherwise."""
+    plain = short_run("ibvs", tmp_path / "ibvs").trace
+    sat = short_run("ibvs_saturated", tmp_path / "sat").trace
+    clip = short_run("ibvs_saturated", tmp_path / "clip", ibvs_saturation="clip").trace
+    q = [f"q{i}" for i in range(1, 7)]
+    u = [f"u{i}" for i in range(1, 7)]
+    assert len(plain) == len(clip)
+    assert np.abs(plain[q].to_numpy() - clip[q].to_numpy()).max() == 0.0  # the old identity
+    n = min(len(plain), len(sat))
+    assert np.abs(plain[q].to_numpy()[:n] - sat[q].to_numpy()[:n]).max() > 1e-4
+    qd_max = np.asarray(CRS_LIMITS.qd_max)
+    us = sat[u].to_numpy(float)[:-1]
+    assert (np.abs(us) <= qd_max + 1e-9).all()
+    assert (np.abs(us) / qd_max).max(axis=1).max() == pytest.approx(1.0)  # scaled to the limit
+    up = plain[u].to_numpy(float)[:1]  # same state at row 0: parallel commands
+    cos = (up @ us[:1].T).item() / (np.linalg.norm(up) * np.linalg.norm(us[:1]))
+    assert cos == pytest.approx(1.0, abs=1e-12)

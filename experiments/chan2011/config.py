@@ -103,6 +103,16 @@ class IBVSConfig(Chan2011Config):
 
 @dataclass(frozen=True)
 class IBVSSaturatedConfig(Chan2011Config):
-    """Baseline: IBVS with each joint velocity clipped to its limit (a saturator)."""
+    """Baseline: IBVS behind a saturator (Sec. III-B: "cannot be achieved with a saturator").
+
+    The paper does not say which saturator. Clipping each joint is what the drive already
+    does to plain IBVS's command, so a clipping saturator made this run the ``ibvs`` run
+    again (identical joint trajectories, issue 17). The saturator here is the one a designer
+    puts in front of the drive: it scales the whole command into the limits, keeping the
+    direction of ``J_s^+ e`` (``ibvs_saturation``; "clip" gives the old run)."""
 
     controller: str = param("ibvs_saturated", choices=CONTROLLERS, help="IBVS + saturator")
+    # ours: scale (direction kept): a per-joint clip is what the drive does anyway
+    ibvs_saturation: str = param("scale", choices=("scale", "clip"),
+                                 help="saturator: scale the command into the limits "
+                                      "(direction kept) or clip each joint")

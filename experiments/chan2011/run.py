@@ -112,8 +112,10 @@ class Chan2011Controller:
         J_s = feature_jacobian(interaction_matrix_points(x, Z),
                                twist_transform(inv_T(T_FLANGE_CAMERA)),
                                self.robot.frame_jacobian("flange", q))
-        sat = self.qd_max if self.config.controller == "ibvs_saturated" else None
-        return ibvs_joint_velocity(J_s, (x - xd).ravel(), self.config.ibvs_gain, sat)
+        if self.config.controller != "ibvs_saturated":  # the drive clips each joint
+            return ibvs_joint_velocity(J_s, (x - xd).ravel(), self.config.ibvs_gain)
+        return ibvs_joint_velocity(J_s, (x - xd).ravel(), self.config.ibvs_gain, self.qd_max,
+                                   saturation=getattr(self.config, "ibvs_saturation", "scale"))
 
     def _nmpc(self, q: np.ndarray, p_k: np.ndarray, cols: dict, events: list
               ) -> tuple[np.ndarray, bool]:
