@@ -317,3 +317,20 @@ def test_the_ablation_config_is_consistent() -> None:
     check_config(Exp3Config())
     with pytest.raises(ConfigError, match="tactile_control"):
         check_config(dataclasses.replace(Exp3NoTactileConfig(), tactile_control=True))
+
+
+def test_the_grasp_reference_is_the_pose_the_manipulation_starts_from(short_run: Path) -> None:
+    """issue 17: obj_d*/obj_rot were relative to the pose one step after the manipulation
+    started, and NaN on the start row. Now the start row reads zero and every later row's
+    displacement is its logged position minus the start row's, exactly."""
+    got = load_run(short_run)
+    df, ev = got.trace, got.events
+    t0 = float(ev.loc[ev["kind"] == "manipulation_start", "t"].iloc[0])
+    i = int(np.flatnonzero(np.isclose(df["t"].to_numpy(float), t0, atol=1e-9))[0])
+    assert df.loc[:i - 1, "obj_rot"].isna().all()
+    assert (df.loc[i, ["obj_dx", "obj_dy", "obj_dz", "obj_disp", "obj_rot"]] == 0.0).all()
+    later = df.loc[i + 1:]
+    for a in "xyz":
+        d = later[f"obj_d{a}"].to_numpy(float)
+        assert np.abs(d - (later[f"obj_{a}"].to_numpy(float) - df.loc[i, f"obj_{a}"])).max() \
+            <= 1e-15

@@ -335,6 +335,7 @@ class AuditReading(NamedTuple):
     columns: dict[str, float | bool]
     touching: tuple[bool, ...]
     dropped: bool
+    T_palm_cylinder: np.ndarray | None = None  # the pose read [m]
 
 
 class GraspAudit:
@@ -426,10 +427,21 @@ class GraspAudit:
         dropped = bool(self.T_ref is not None and not any(touching) and force["palm"] == 0.0
                        and not on_support and cols["obj_disp"] > DROP_M)
         cols["dropped"] = dropped
-        return AuditReading(cols, touching, dropped)
+        return AuditReading(cols, touching, dropped, T)
 
     def columns(self, r: AuditReading) -> dict[str, float | bool]:
         return r.columns
+
+    def after_control(self, r: AuditReading) -> dict[str, float]:
+        """Called by the runner after the controller of the same step: if that controller
+        has just started the manipulation, this step's pose (read before it: the state it
+        started from) becomes the reference, and the row gets zero displacement and rotation
+        (issue 17: the reference used to be the next step's pose, the start row NaN)."""
+        if self.T_ref is None and r.T_palm_cylinder is not None and self.reference_now():
+            self.T_ref = r.T_palm_cylinder.copy()
+            return {"obj_dx": 0.0, "obj_dy": 0.0, "obj_dz": 0.0, "obj_disp": 0.0,
+                    "obj_rot": 0.0}
+        return {}
 
     def events(self, r: AuditReading) -> list[tuple[str, str]]:
         out = []

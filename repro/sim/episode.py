@@ -129,6 +129,10 @@ class Sensor(Protocol):
         """Events of a measurement (a sensor fault...)."""
         ...
 
+    # Optional: ``after_control(reading) -> Mapping[str, Scalar]``, called after the
+    # controller of the same step, overwrites some of the reading's columns (an audit that
+    # logs relative to what the controller decided this step: pomares2011's GraspAudit).
+
     def failure(self, reading: Any) -> str | None:
         """Why the sensor can no longer be trusted (the run then stops safely), or None."""
         ...
@@ -580,6 +584,10 @@ class _Runner:
             row["ctrl_s"] = t_ctrl
             split["controller_s"] += t_ctrl
             tic2 = clock()
+            for s in ep.sensors:  # columns a sensor can only give once the controller ran
+                amend = getattr(s, "after_control", None)
+                if amend is not None:
+                    row.update(amend(readings[s.name]))
             row.update(res.columns)
             for kind, detail in res.events:
                 rec.event(t, k, kind, detail)
