@@ -24,7 +24,7 @@ from repro.control.proximity_features import (
     fit_plane_normal,
     ring_interaction_matrix,
 )
-from repro.errors import ConfigError
+from repro.errors import ConfigError, UnknownChoiceError
 from repro.geometry import make_T
 from repro.sensors.proximity import (
     RAY_MASK,
@@ -485,3 +485,61 @@ def test_normal_estimator_single_step_is_in_plane() -> None:
         in_plane /= np.linalg.norm(in_plane)
         np.testing.assert_allclose(N[i0], in_plane, atol=1e-6)
         assert _angle_deg(N[i0], n_T) > 1.0  # hence wrong for a wall tilted out of plane
+
+
+# --------------------------------------------------------------------------- issue 17: cone
+
+
+def _cone_world(pole: bool = False):
+    c = p.connect(p.DIRECT)
+    if pole:  # a thin vertical pole 0.3 m ahead, 10 deg off sensor 1's axis (x)
+        ang = np.radians(10.0)
+        s = p.createCollisionShape(p.GEOM_CYLINDER, radius=0.003, height=1.0,
+                                   physicsClientId=c)
+        p.createMultiBody(0, s, basePosition=[RADIUS + 0.3 * np.cos(ang), 0.3 * np.sin(ang),
+                                              0.0], physicsClientId=c)
+    else:  # a wall facing sensor 1, 0.4 m from it
+        s = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.01, 2.0, 2.0], physicsClientId=c)
+        p.createMultiBody(0, s, basePosition=[RADIUS + 0.4 + 0.01, 0, 0], physicsClientId=c)
+    return c
+
+
+def test_the_default_ring_is_one_ray_per_sensor():
+    spec = RingSpec("r", RADIUS, M)
+    assert spec.fov_deg == 0.0 and spec.cone()[0].shape == (1, 3)
+
+
+def test_a_cone_sees_what_the_axis_ray_misses_and_reports_its_return():
+    c = _cone_world(pole=True)
+    try:
+        ray = ProximityRing(RingSpec("r", RADIUS, M)).read(c, np.eye(4))
+        cone = ProximityRing(RingSpec("r", RADIUS, M, fov_deg=27.0, cone_rings=4,
+                                      cone_azimuths=16)).read(c, np.eye(4))
+    finally:
+        p.disconnect(c)
+    assert not ray.detected[0] and ray.delta[0] == 1.0
+    assert cone.detected[0] and abs(cone.delta[0] - 0.3) < 0.02  # ~ its distance
+    assert cone.hit_body[0] >= 0
+
+
+def test_a_cone_on_a_facing_wall_nearest_is_the_axis_and_weighted_is_longer():
+    c = _cone_world()
+    try:
+        reads = {ret: ProximityRing(RingSpec("r", RADIUS, M, fov_deg=27.0,
+                                             cone_return=ret)).read(c, np.eye(4))
+                 for ret in ("nearest", "weighted")}
+        ray = ProximityRing(RingSpec("r", RADIUS, M)).read(c, np.eye(4))
+    finally:
+        p.disconnect(c)
+    assert reads["nearest"].delta[0] == pytest.approx(ray.delta[0], abs=1e-6)
+    assert ray.delta[0] == pytest.approx(0.4, abs=1e-6)
+    # the off-axis rays travel 0.4 / cos(a): their weighted mean is longer, and bounded by
+    # the outermost ray's 0.4 / cos(13.5 deg)
+    assert 0.4 < reads["weighted"].delta[0] < 0.4 / np.cos(np.radians(13.5))
+
+
+def test_a_bad_cone_is_refused():
+    with pytest.raises(ConfigError):
+        RingSpec("r", RADIUS, M, fov_deg=200.0)
+    with pytest.raises(UnknownChoiceError):
+        RingSpec("r", RADIUS, M, fov_deg=20.0, cone_return="median")

@@ -21,7 +21,10 @@ from typing import Any
 import numpy as np
 import pybullet as p
 
-from repro.errors import ConfigError
+from repro.errors import ConfigError, UnknownChoiceError
+
+#: What a cone of rays reports (:class:`RingSpec`).
+CONE_RETURNS = ("nearest", "weighted")
 
 #: Collision-filter group of the robot's links: rays ignore it, so a ring does
 #: not see its own robot (# ours: the paper's rings see only obstacles). PyBullet
@@ -42,6 +45,15 @@ class RingSpec:
         min_range: shortest distance the sensor reports [m] (closer returns this).
         theta0: angle of sensor 1 about the ring z axis from the ring x axis [rad].
         noise_std: standard deviation of additive Gaussian noise on detections [m].
+        fov_deg: full angle of each sensor's field of view [deg]; 0 (default): one ray
+            along the axis, the paper's "detects along its axis". VL53L-class ToF parts
+            have a 25-27 deg cone (issue 17: an option, so that the sweep can vary it).
+        cone_rings, cone_azimuths: rays of a cone: the axis plus ``cone_rings`` circles
+            at ``k / cone_rings`` of the half-angle, ``cone_azimuths`` rays each.
+        cone_return: what a cone reports: ``"nearest"`` (the shortest return of its
+            rays, how a ToF's first photons read) or ``"weighted"`` (the mean of the
+            returns of the rays that hit, each weighted by the cosine of its angle to the
+            axis: a lens's fall-off, ours).
     """
 
     name: str
@@ -51,12 +63,38 @@ class RingSpec:
     min_range: float = 0.0
     theta0: float = 0.0
     noise_std: float = 0.0
+    fov_deg: float = 0.0
+    cone_rings: int = 2
+    cone_azimuths: int = 8
+    cone_return: str = "nearest"
 
     def __post_init__(self) -> None:
         if self.radius <= 0 or self.n_sensors < 1 or self.max_range <= self.min_range:
             raise ConfigError(f"invalid ring {self.name}: radius={self.radius}, "
                               f"n_sensors={self.n_sensors}, range=({self.min_range}, "
                               f"{self.max_range})")
+        if not 0.0 <= self.fov_deg < 180.0 or self.cone_rings < 1 or self.cone_azimuths < 3:
+            raise ConfigError(f"invalid cone of ring {self.name}: fov_deg={self.fov_deg} "
+                              f"(in [0, 180)), cone_rings={self.cone_rings} (>= 1), "
+                              f"cone_azimuths={self.cone_azimuths} (>= 3)")
+        if self.cone_return not in CONE_RETURNS:
+            raise UnknownChoiceError("cone return", self.cone_return, CONE_RETURNS)
+
+    def cone(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rays of one sensor's field of view in the sensor frame (axis = x, ring axis = z):
+        (k, 3) unit directions and their (k,) angles to the axis [rad]; the axis alone
+        when ``fov_deg`` is 0."""
+        if self.fov_deg == 0.0:
+            return np.array([[1.0, 0.0, 0.0]]), np.zeros(1)
+        half = np.radians(self.fov_deg) / 2.0
+        dirs, angles = [[1.0, 0.0, 0.0]], [0.0]
+        for k in range(1, self.cone_rings + 1):
+            a = half * k / self.cone_rings
+            for j in range(self.cone_azimuths):
+                phi = 2.0 * np.pi * j / self.cone_azimuths
+                dirs.append([np.cos(a), np.sin(a) * np.cos(phi), np.sin(a) * np.sin(phi)])
+                angles.append(a)
+        return np.asarray(dirs), np.asarray(angles)
 
     def directions(self) -> np.ndarray:
         """Sensor axes n_S_i in the ring frame, (m, 3) unit vectors."""
@@ -117,6 +155,13 @@ class ProximityRing:
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self._dirs = spec.directions()
         self._origins = spec.origins()
+        # the cone's rays of every sensor in the ring frame: (m, k, 3); the sensor frame's
+        # x is n_S_i, its z the ring axis, its y = z x n_S_i
+        cone, self._cone_angles = spec.cone()
+        z = np.array([0.0, 0.0, 1.0])
+        y = np.cross(z, self._dirs)
+        self._cone = (cone[None, :, 0:1] * self._dirs[:, None, :]
+                      + cone[None, :, 1:2] * y[:, None, :] + cone[None, :, 2:3] * z)
         self._last_valid = np.full(spec.n_sensors, spec.max_range)
         self.fault_value = fault_value
         self.max_consecutive_faults = int(max_consecutive_faults)
@@ -126,14 +171,41 @@ class ProximityRing:
         """Raw ray casts: (distance (m,) [m] or max_range, hit body ids (m,))."""
         R, t = T_world_ring[:3, :3], T_world_ring[:3, 3]
         start = self._origins @ R.T + t
-        end = start + self.spec.max_range * (self._dirs @ R.T)
-        hits = p.rayTestBatch(
-            start.tolist(), end.tolist(), collisionFilterMask=RAY_MASK,
-            physicsClientId=client,
-        )
-        frac = np.array([h[2] if h[0] >= 0 else 1.0 for h in hits])
-        body = np.array([h[0] for h in hits], dtype=int)
-        return frac * self.spec.max_range, body
+        if self.spec.fov_deg == 0.0:  # one ray per sensor, along its axis
+            end = start + self.spec.max_range * (self._dirs @ R.T)
+            hits = p.rayTestBatch(
+                start.tolist(), end.tolist(), collisionFilterMask=RAY_MASK,
+                physicsClientId=client,
+            )
+            frac = np.array([h[2] if h[0] >= 0 else 1.0 for h in hits])
+            body = np.array([h[0] for h in hits], dtype=int)
+            return frac * self.spec.max_range, body
+        return self._cast_cone(client, R, start)
+
+    def _cast_cone(self, client: int, R: np.ndarray, start: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """Every ray of every sensor's cone; per sensor its ``cone_return`` and the body of
+        its nearest hit."""
+        m, k = self._cone.shape[:2]
+        s = np.repeat(start, k, axis=0)
+        end = s + self.spec.max_range * (self._cone.reshape(-1, 3) @ R.T)
+        hits = p.rayTestBatch(s.tolist(), end.tolist(), collisionFilterMask=RAY_MASK,
+                              physicsClientId=client)
+        body = np.array([h[0] for h in hits], dtype=int).reshape(m, k)
+        d = np.array([h[2] if h[0] >= 0 else 1.0 for h in hits]).reshape(m, k)
+        d = d * self.spec.max_range
+        hit = body >= 0
+        nearest = np.where(hit, d, np.inf).argmin(axis=1)
+        rows = np.arange(m)
+        out_body = np.where(hit.any(axis=1), body[rows, nearest], -1)
+        if self.spec.cone_return == "nearest":
+            out = np.where(hit.any(axis=1), d[rows, nearest], self.spec.max_range)
+        else:
+            w = np.cos(self._cone_angles)[None, :] * hit
+            wsum = w.sum(axis=1)
+            out = np.where(wsum > 0, (w * d).sum(axis=1) / np.where(wsum > 0, wsum, 1.0),
+                           self.spec.max_range)
+        return out, out_body
 
     def read(self, client: int, T_world_ring: np.ndarray) -> RingReading:
         """Scan the ring at pose ``T_world_ring``: noisy, clipped, NaN-safe readings.
@@ -175,6 +247,17 @@ RAY_MODEL = (
     "reading is a fault: the sensor reads its ring's threshold delta* (an obstacle at the "
     "threshold) and the fault is an event; 3 faults in a row and the sensor has failed: "
     "the run stops safely (zero velocity, status failed)")
+
+
+CONE_MODEL = (
+    "sensor i of a ring: rays from S_j + r_j n_i over a cone of full angle cone.fov_deg about "
+    "n_i: the axis plus cone.rings circles at k / rings of the half-angle, cone.azimuths rays "
+    "each (in the sensor frame x = n_i, z = the ring axis, y = z x n_i: direction (cos a, "
+    "sin a cos phi, sin a sin phi)); each ray as in the single-ray model; the reading is the "
+    "nearest return "
+    "(return = nearest) or the mean of the returns of the rays that hit weighted by the cosine "
+    "of each ray's angle to n_i (return = weighted); noise, range limits and faults as in the "
+    "single-ray model")
 
 
 class RingSensor:
@@ -249,7 +332,10 @@ class RingSensor:
         return {"kind": "tof_ring", "robot": self.robot.name, "frame": self.frame,
                 "radius": s.radius, "n_sensors": s.n_sensors, "max_range": s.max_range,
                 "min_range": s.min_range, "noise_std": s.noise_std, "theta0": s.theta0,
-                "sensor_axes_ring_frame": s.directions(), "ray_model": RAY_MODEL,
+                "sensor_axes_ring_frame": s.directions(),
+                "ray_model": RAY_MODEL if s.fov_deg == 0.0 else CONE_MODEL,
+                "cone": {"fov_deg": s.fov_deg, "rings": s.cone_rings,
+                         "azimuths": s.cone_azimuths, "return": s.cone_return},
                 "ray_filter": {"collision_filter_mask": RAY_MASK,
                                "robot_links_collision_group": ROBOT_GROUP,
                                "robots_in_group": [self.robot.name],
