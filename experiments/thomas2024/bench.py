@@ -32,13 +32,32 @@ from repro.sim.panda import PANDA_LIMITS
 QPS = C.QP_SOLVERS  # every qp_solver choice
 
 
-def _states(results_dir: Path, case: str, cfg: C.Thomas2024Config, tmp: Path) -> np.ndarray:
+def _trace(results_dir: Path, case: str, cfg: C.Thomas2024Config, tmp: Path) -> pd.DataFrame:
     trace = results_dir / "thomas2024" / case / "trace.csv"
     if not trace.exists():
         run(replace(cfg, camera_mode="exact", duration=4.0), tmp / case)
         trace = tmp / case / "trace.csv"
-    df = pd.read_csv(trace)
+    return pd.read_csv(trace)
+
+
+def _states(results_dir: Path, case: str, cfg: C.Thomas2024Config, tmp: Path) -> np.ndarray:
+    df = _trace(results_dir, case, cfg, tmp)
     return df[[f"q{i}" for i in range(1, 8)]].to_numpy(dtype=float)
+
+
+def _mover_poses(df: pd.DataFrame, names: list[str]) -> dict[str, list[np.ndarray]]:
+    """The logged poses (4x4, world) of the moving bodies ``names``, per trace row."""
+    from repro.sim.scene import pose_columns
+    from repro.sim.world import pb_to_pose
+
+    out: dict[str, list[np.ndarray]] = {}
+    for name in names:
+        cols = pose_columns(name)
+        if not set(cols) <= set(df.columns):
+            continue
+        v = df[cols].to_numpy(dtype=float)
+        out[name] = [pb_to_pose(r[:3], r[3:]) for r in v]
+    return out
 
 
 class _RecordingSolver(QPSolver):
@@ -58,9 +77,11 @@ class _RecordingSolver(QPSolver):
 
 
 def _replay(cfg: C.Thomas2024Config, states: np.ndarray, tmp: Path,
-            record: list[QPProblem] | None = None) -> dict[str, list[float]]:
-    """Reset the robot to each row of ``states`` (n_states, 7) [rad], read the sensors and
-    time one controller step; with ``record``, every hard QP (10) is appended to it."""
+            record: list[QPProblem] | None = None,
+            movers: dict[str, list[np.ndarray]] | None = None) -> dict[str, list[float]]:
+    """Reset the robot to each row of ``states`` (n_states, 7) [rad] (and the moving
+    bodies to their logged poses ``movers``: case 3's hand), read the sensors and time one
+    controller step; with ``record``, every hard QP (10) is appended to it."""
     ep, ctrl = build(cfg, tmp / "bench_setup")
     if record is not None:
         ctrl.qp.hard = _RecordingSolver(ctrl.qp.hard, record)
@@ -69,8 +90,10 @@ def _replay(cfg: C.Thomas2024Config, states: np.ndarray, tmp: Path,
     assert target.dot_target is not None
     out: dict[str, list[float]] = {"step": [], "qp": [], "rays": [], "camera": []}
     try:
-        for q in states:
+        for k, q in enumerate(states):
             rig.robot.reset(q)
+            for name, poses in (movers or {}).items():
+                scene.move(name, poses[k])
             tic = time.perf_counter()
             uv, found, Z = rig.camera.measure(scene.render_client, rig.pose(q), target.dot_target,
                                               target.T_world)
@@ -270,6 +293,15 @@ def bench(results_dir: Path) -> list[dict[str, object]]:
                     rows.append(timing_row(f"{case}.ray_casts_36", t["rays"]))
             t = _replay(replace(cls(), camera_mode="render"), states[::5], tmp)
             rows.append(timing_row(f"{case}.camera_render_detect_640x480", t["camera"]))
+        # Case 3: the hand moves; each state is replayed with the hand at its logged pose.
+        df = _trace(results_dir, "case3", C.Case3Config(), tmp)
+        states3 = df[[f"q{i}" for i in range(1, 8)]].to_numpy(dtype=float)
+        movers = _mover_poses(df, ["hand"])
+        for solver in QPS:
+            cfg3 = replace(C.Case3Config(), camera_mode="exact", qp_solver=solver)
+            t = _replay(cfg3, states3, tmp, movers=movers)
+            rows.append(timing_row(f"case3.controller_step[{solver}]", t["step"]))
+            rows.append(timing_row(f"case3.qp_solve[{solver}]", t["qp"]))
         rows += qp_solver_table(sequences, tmp)
     # Whole closed loop, from the committed runs' manifests (render mode).
     for name in ("case1", "case2", "case3"):
