@@ -735,4 +735,7 @@ class BarrettHandDrive:
                 f"{POSITION_GAIN}), JOINT_GEAR constraints distal = proximal / 3 (engaged) "
                 "and spread 2 = spread 1",
                 "measured_motor_angle": "motor_q{i} = 93.75 (q_proximal + q_distal)",
-                "counts_per_motor_rev": COUNTS_PER_MOTOR_REV}
+                "counts_per_motor_rev": COUNTS_PER_MOTOR_REV,
+                "motor_angle_range_rad": [0.0, MOTOR_ANGLE_MAX],
+                "motor_angle_range_meaning": "every motor target is clipped to this range: "
+                "DISTAL_RATIO x (the proximal + distal joint limits), the fingers fully closed"}

@@ -574,7 +574,11 @@ class _Runner:
             split["sensors_s"] += clock() - tic1
             failed_sensor = None
             for s in ep.sensors:
-                row.update(s.columns(readings[s.name]))
+                sensor_cols = s.columns(readings[s.name])
+                row.update(sensor_cols)
+                for col, v in sensor_cols.items():  # a sensor's ground-truth distances
+                    if "dist_" in col and isinstance(v, float):  # (pomares2011 hand_dist_*)
+                        self._keep_min(self.dist_min, col, v, t)  # join the per-step minima
                 for kind, detail in s.events(readings[s.name]):
                     rec.event(t, k, kind, detail)
                 failed_sensor = failed_sensor or s.failure(readings[s.name])
