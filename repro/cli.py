@@ -19,7 +19,6 @@ folder is created. SIGINT and SIGTERM during a run close it with status
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import json
 import os
@@ -46,7 +45,6 @@ DEFAULT_FIGURES = Path("figures")
 DEFAULT_REPORT = Path("REPORT.md")
 EXIT_USAGE = 2
 SHORT_HASH_LEN = 8
-#: The signals a run is closed on (status "interrupted"); exit code 128 + the signal number.
 
 
 # --------------------------------------------------------------------------- parser
@@ -213,13 +211,6 @@ def default_out_dir(exp: Experiment, results_dir: Path, config: Any) -> Path:
     return base.with_name(f"{exp.name}__{digest[:SHORT_HASH_LEN]}")
 
 
-def _stop_on_signals(fired: list[int]) -> contextlib.AbstractContextManager[None]:
-    """:func:`repro.runs.signals.stop_on_signals`: the first SIGINT / SIGTERM raises
-    ``KeyboardInterrupt`` (never inside a native solver or a manifest write), later ones
-    are ignored, so the trace and manifest are closed whole (status "interrupted")."""
-    return stop_on_signals(fired)
-
-
 def _interrupted(fired: list[int], out_dir: Path, since: float) -> int:
     """Print the one-line report of a run interrupted after ``since`` (time.time()); return
     the exit code 128 + signum. A trace.csv older than ``since`` is an earlier run's: 0 rows."""
@@ -237,11 +228,10 @@ def _interrupted(fired: list[int], out_dir: Path, since: float) -> int:
 
 
 def check_dir_arg(path: Path, option: str, must_exist: bool = False) -> None:
-    """Refuse a folder argument that cannot be one, before anything is written: empty, a
+    """Refuse a folder argument that cannot be one, before anything is written: a
     file (or below one), missing when it must exist, or not writable where it would be
-    made. Raises :class:`ConfigError` with one line naming ``option``."""
-    if str(path) == "":
-        raise ConfigError(f"{option} is empty: give a folder")
+    made. Raises :class:`ConfigError` with one line naming ``option``. (An empty path is
+    refused by the parser, :func:`_path`.)"""
     probe = Path(path)
     if probe.exists() and not probe.is_dir():
         raise ConfigError(f"{option} {path} is a file, not a folder")
@@ -393,7 +383,8 @@ def _run_interruptible(exp: Experiment, config: Any, out_dir: Path) -> Path | in
     fired: list[int] = []
     started = time.time()
     try:
-        with _stop_on_signals(fired):
+        # the first SIGINT / SIGTERM stops the run between two steps; it closes whole
+        with stop_on_signals(fired):
             return registry.run_experiment(exp, config, out_dir)
     except KeyboardInterrupt:
         return _interrupted(fired, out_dir, started)

@@ -100,7 +100,11 @@ def test_links_are_posed_from_pybullet_and_only_near_links_reported(client):
     ed.begin()
     near = ed.link_distances(rob, box, 1.0)
     assert near and min(near.values()) < 1.0
-    assert ed.link_distances(rob, box, 1e-3) == {} or min(near.values()) < 1e-3
+    closest = min(near.values())
+    assert closest > 0.0  # the arm stands clear of the box here
+    assert ed.link_distances(rob, box, closest / 2) == {}  # nothing within half of it
+    assert set(ed.link_distances(rob, box, closest * 1.001)) == {
+        link for link, d in near.items() if d < closest * 1.001}
     p.resetJointState(rob, 1, 0.8, physicsClientId=client)  # shoulder pitch: the arm moves
     ed.begin()
     moved = ed.link_distances(rob, box, 1.0)

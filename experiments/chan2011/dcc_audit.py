@@ -50,7 +50,9 @@ class DCCAuditConfig:
 
 def _near_start(model: CollisionModel, rng: np.random.Generator, anchor: np.ndarray,
                 lo: np.ndarray, hi: np.ndarray, near: float, tries: int = 20000) -> np.ndarray:
-    """A configuration around ``anchor`` whose distance to the obstacles is in (0, near) m."""
+    """A configuration around ``anchor`` whose distance to the obstacles is in (0, near) m,
+    drawn as the local segments' starts are (0.6 rad std about the experiment's start).
+    ours: 20000 draws; ~1 in 20 lands within 5 cm here, so a miss means a broken model."""
     for _ in range(tries):
         q = np.clip(anchor + rng.normal(0, 0.6, 6), lo, hi)
         if 0.0 < model.distance(q) < near:
@@ -124,6 +126,8 @@ def run(config: DCCAuditConfig, out_dir: Path, experiment: str | None = None) ->
                 q_f = np.clip(q_i + rng.uniform(-config.max_step, config.max_step, 6), lo, hi)
             else:
                 q_i = _near_start(model, rng, anchors[0], lo, hi, config.near_distance)
+                # ours: a quarter of a local step (0.15 rad x r_j <= 0.85 m: <= 13 cm of
+                # travel) keeps the segment near the obstacle it starts beside
                 step = config.max_step / 4
                 q_f = np.clip(q_i + rng.uniform(-step, step, 6), lo, hi)
             d_i, d_f = model.distance(q_i), model.distance(q_f)

@@ -76,18 +76,10 @@ def conrod_parts() -> list[Part]:
 
 
 
-def usable(sol: NMPCSolution) -> bool:
-    """Whether an NMPC solution may be commanded: converged and feasible, or the last
-    iterate of a solve stopped on its iteration limit that meets every constraint within
-    ``feas_tol`` (issue 17: discarding such iterates stalled variant runs for good; an
-    iterate inside the constraints is a motion the constraints allow, if not the optimal
-    one)."""
-    return sol.success or (sol.feasible and sol.iteration_limit)
-
-
 def best_iterate(*sols: NMPCSolution) -> NMPCSolution | None:
-    """The usable solution of lowest cost (eq. (12)) among ``sols``, None if none is."""
-    ok = [s for s in sols if usable(s)]
+    """The usable solution (:attr:`NMPCSolution.usable`) of lowest cost (eq. (12)) among
+    ``sols``, None if none is."""
+    ok = [s for s in sols if s.usable]
     return min(ok, key=lambda s: s.cost) if ok else None
 
 class Chan2011Controller:
@@ -125,7 +117,7 @@ class Chan2011Controller:
         d_k = self.nmpc.disturbance(p_k, q, s.T_object_estimate, P)  # eq. (11)
         sol = self.nmpc.solve(q, self.p_d, d_k, s.T_object_estimate, P)
         lo = hi = None
-        if self.dcc is not None and usable(sol):
+        if self.dcc is not None and sol.usable:
             # Sec. IV-B: certify the planned motion with eq. (20); if it fails, bisect: the
             # first certified sub-segment [q_k, q_a] bounds a collision-free hyper-rectangle
             # that replaces the joint limits (8) in a new solve (or the box around q_k).
@@ -163,7 +155,7 @@ class Chan2011Controller:
         if sol.success:
             cols["nmpc_command"] = "converged"
             return sol.qdot, True
-        if usable(sol):
+        if sol.usable:
             cols["nmpc_command"] = "feasible_iterate"
             events.append(("nmpc_feasible_iterate",
                            f"{sol.status} after {sol.iterations} iterations; the last iterate "

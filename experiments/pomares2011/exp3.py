@@ -384,8 +384,6 @@ class GraspAudit:
         pos, quat = p.getLinkState(self.hand.body, self.palm, computeForwardKinematics=True,
                                    physicsClientId=c)[4:6]
         T = inv_T(pb_to_pose(pos, quat)) @ T_world_cyl  # the palm moves with an arm
-        if self.T_ref is None and self.reference_now():
-            self.T_ref = T.copy()
         cols: dict[str, float | bool] = {}
         for a, v in zip("xyz", T[:3, 3], strict=True):
             cols[f"obj_{a}"] = float(v)

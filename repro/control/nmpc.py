@@ -177,8 +177,8 @@ class NMPCSolution:
 
     Attributes:
         qdot: (n,) joint velocity to apply over the next step [rad/s]. When ``success`` is
-            False it is the solver's last iterate (non-finite entries set to 0): do not
-            apply it, use a fallback (e.g. zero velocity).
+            False it is the solver's last iterate (non-finite entries set to 0): apply it
+            only when :attr:`usable`, else use a fallback (e.g. zero velocity).
         success: the solver converged and the solution satisfies every bound within
             ``NMPCConfig.feas_tol``.
         status: the solver's ``return_status`` (or the exception message).
@@ -207,6 +207,15 @@ class NMPCSolution:
     max_violation: float
     feasible: bool = False
     iteration_limit: bool = False
+
+    @property
+    def usable(self) -> bool:
+        """Whether ``qdot`` may be commanded: converged and feasible, or the last iterate of
+        a solve stopped on its iteration limit that meets every constraint within
+        ``feas_tol`` (chan2011, issue 17: discarding such iterates stalled variant runs for
+        good; an iterate inside the constraints is a motion they allow, if not the optimal
+        one). Otherwise fall back (e.g. zero velocity)."""
+        return self.success or (self.feasible and self.iteration_limit)
 
 
 @contextlib.contextmanager

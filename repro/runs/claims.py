@@ -32,7 +32,7 @@ import pandas as pd
 from repro.errors import ConfigError, ReproError, UnknownChoiceError
 from repro.runs.registry import Paper, compute_config_hash, load_papers
 from repro.runs.trace import RunFiles
-from repro.runs.validate import DamagedRun, load_valid_run
+from repro.runs.validate import DamagedRun, check_run
 
 __all__ = [
     "CLAIMS_COLUMNS",
@@ -246,7 +246,7 @@ def _load_runs(
                 cache[run_dir] = f"run {name!r} missing ({run_dir} does not exist)"
             else:
                 try:
-                    cache[run_dir] = load_valid_run(run_dir)
+                    cache[run_dir] = check_run(run_dir)
                 except DamagedRun as exc:  # names the folder and the first failing rule
                     cache[run_dir] = f"run {name!r} not usable: {exc}"
         loaded = cache[run_dir]

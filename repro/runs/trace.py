@@ -773,17 +773,17 @@ def add_vector(row: dict[str, Any], name: str, values: Any) -> None:
 
 
 def load_run_if_present(base: Path, name: str) -> RunFiles | None:
-    """The run ``base / name`` validated (:func:`repro.runs.validate.load_valid_run`) if it
+    """The run ``base / name`` validated (:func:`repro.runs.validate.check_run`) if it
     has a manifest, else None: figures draw what exists and is whole. A damaged or
     unfinished run is skipped with one line on stderr naming its folder and the rule it
     fails."""
-    from repro.runs.validate import DamagedRun, load_valid_run
+    from repro.runs.validate import DamagedRun, check_run
 
     path = Path(base) / name
     if not (path / "manifest.json").exists():
         return None
     try:
-        return load_valid_run(path)
+        return check_run(path)
     except DamagedRun as exc:
         print(f"figures: skipping {exc}", file=sys.stderr)
         return None

@@ -1,7 +1,7 @@
 """One validating loader for run folders: nothing reads a damaged run as if it were whole.
 
 Figures, claims, the report and ``repro results`` all read runs through
-:func:`load_valid_run`. It checks, in this order, and stops at the first rule that fails
+:func:`check_run`. It checks, in this order, and stops at the first rule that fails
 (:class:`DamagedRun` names the folder and that rule):
 
 1. the folder and its five files exist (trace.csv, columns.json, events.csv, manifest.json,
@@ -18,7 +18,8 @@ Figures, claims, the report and ``repro results`` all read runs through
    columns anything, every other unit a number (an empty cell, or nan, is a missing value);
 7. ``t`` (in a time series) is finite and strictly increasing, ``step`` (when present)
    finite integers;
-8. events.csv has the columns t, step, kind, detail with numeric t and integer steps.
+8. events.csv has the columns t, step, kind, detail with numeric t and integer steps
+   (:func:`repro.runs.trace.load_run` checks these; its error becomes the rule).
 """
 
 from __future__ import annotations
@@ -26,7 +27,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +36,6 @@ import pandas as pd
 from repro.errors import ReproError
 from repro.runs.columns import COLUMNS_FILE
 from repro.runs.trace import (
-    EVENTS_COLUMNS,
     RUN_FILES,
     RUN_STATUSES,
     RunFiles,
@@ -44,7 +43,7 @@ from repro.runs.trace import (
     load_run,
 )
 
-__all__ = ["DamagedRun", "VALID_FILES", "check_run", "load_valid_run"]
+__all__ = ["DamagedRun", "VALID_FILES", "check_run"]
 
 #: The files every run folder must hold.
 VALID_FILES = (*RUN_FILES, COLUMNS_FILE)
@@ -206,14 +205,4 @@ def check_run(run_dir: Path) -> RunFiles:
         raise DamagedRun(run_dir, str(exc)) from exc
     _check_types(run_dir, run.trace, units)
     _check_time(run_dir, run.trace)
-    ev = run.events
-    if tuple(ev.columns) != EVENTS_COLUMNS:
-        raise DamagedRun(run_dir, "events.csv columns are not t, step, kind, detail")
-    if len(ev) and not all(math.isfinite(s) for s in ev["step"].astype(float)):
-        raise DamagedRun(run_dir, "events.csv step holds a value that is not an integer")
     return run
-
-
-def load_valid_run(run_dir: Path) -> RunFiles:
-    """:func:`check_run`: the files of a whole, completed run, or :class:`DamagedRun`."""
-    return check_run(run_dir)

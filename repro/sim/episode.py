@@ -368,6 +368,7 @@ class _Runner:
     def __init__(self, ep: Episode, rec: TraceRecorder, out_dir: Path) -> None:
         self.ep, self.rec, self.out_dir = ep, rec, out_dir
         self.guard = StepGuard()  # signals are raised between steps (repro.runs.signals)
+        self._sensor_dist_cols: dict[str, list[str]] = {}  # sensor -> its *dist_* columns
         self.cols = runner_columns(ep).extend(ep.columns)
         self.robots = {name: d.robot for name, d in ep.drives.items()}
         #: joint groups no drive commands: observed and logged only
@@ -576,9 +577,14 @@ class _Runner:
             for s in ep.sensors:
                 sensor_cols = s.columns(readings[s.name])
                 row.update(sensor_cols)
-                for col, v in sensor_cols.items():  # a sensor's ground-truth distances
-                    if "dist_" in col and isinstance(v, float):  # (pomares2011 hand_dist_*)
-                        self._keep_min(self.dist_min, col, v, t)  # join the per-step minima
+                # a sensor's ground-truth distances (pomares2011 hand_dist_*) join the
+                # per-step minima; which columns they are is found once per sensor
+                dist_cols = self._sensor_dist_cols.get(s.name)
+                if dist_cols is None:
+                    dist_cols = self._sensor_dist_cols[s.name] = [
+                        c for c in sensor_cols if "dist_" in c]
+                for col in dist_cols:
+                    self._keep_min(self.dist_min, col, float(sensor_cols[col]), t)
                 for kind, detail in s.events(readings[s.name]):
                     rec.event(t, k, kind, detail)
                 failed_sensor = failed_sensor or s.failure(readings[s.name])

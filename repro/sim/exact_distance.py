@@ -51,7 +51,6 @@ class Shape:
         R_local, p_local: its frame in the link's inertial frame (rotation, position [m]).
         centre: centre of its bounding sphere in its own frame [m].
         radius: radius of that sphere [m].
-        kind: "box", "sphere", "cylinder", "capsule" or "mesh".
     """
 
     link: int
@@ -60,7 +59,6 @@ class Shape:
     p_local: np.ndarray
     centre: np.ndarray
     radius: float
-    kind: str
 
 
 @dataclass
@@ -69,7 +67,6 @@ class BodyShapes:
 
     body: int
     shapes: list[Shape]
-    links: list[int]  # distinct links, in index order
     n_links: int  # p.getNumJoints: the links whose state is read
     frame: np.ndarray  # (n,) per shape: its link's row in the link-frame arrays (link + 1)
     offset: np.ndarray  # (n, 3) per shape: its bounding-sphere centre in the link frame [m]
@@ -98,26 +95,25 @@ def _shape(link: int, data: tuple) -> Shape:
     R = np.array(p.getMatrixFromQuaternion(quat), dtype=float).reshape(3, 3)
     centre = np.zeros(3)
     if geom == p.GEOM_BOX:  # dims: full extents
-        g, kind = coal.Box(*dims), "box"
+        g = coal.Box(*dims)
         radius = 0.5 * math.sqrt(sum(d * d for d in dims))
     elif geom == p.GEOM_SPHERE:  # dims[0]: radius
-        g, kind, radius = coal.Sphere(dims[0]), "sphere", dims[0]
+        g, radius = coal.Sphere(dims[0]), dims[0]
     elif geom == p.GEOM_CYLINDER:  # dims: length, radius; axis z
-        g, kind = coal.Cylinder(dims[1], dims[0]), "cylinder"
+        g = coal.Cylinder(dims[1], dims[0])
         radius = math.hypot(dims[1], 0.5 * dims[0])
     elif geom == p.GEOM_CAPSULE:  # dims: length between the cap centres, radius
-        g, kind, radius = coal.Capsule(dims[1], dims[0]), "capsule", dims[1] + 0.5 * dims[0]
+        g, radius = coal.Capsule(dims[1], dims[0]), dims[1] + 0.5 * dims[0]
     elif geom == p.GEOM_MESH:
         g, pts = _mesh_hull(fname.decode() if isinstance(fname, bytes) else fname,
                             np.asarray(dims, dtype=float))
-        kind = "mesh"
         centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
         radius = float(np.linalg.norm(pts - centre, axis=1).max())
     else:
         raise ConfigError(f"collision shape type {geom} of link {link} is not supported by "
                           "the exact distance audit (boxes, spheres, cylinders, capsules, "
                           "convex meshes)")
-    return Shape(link, g, R, np.asarray(pos, dtype=float), centre, float(radius), kind)
+    return Shape(link, g, R, np.asarray(pos, dtype=float), centre, float(radius))
 
 
 def body_shapes(client: int, body: int) -> BodyShapes:
@@ -125,11 +121,10 @@ def body_shapes(client: int, body: int) -> BodyShapes:
     n = p.getNumJoints(body, physicsClientId=client)
     shapes = [_shape(link, d) for link in range(-1, n)
               for d in p.getCollisionShapeData(body, link, physicsClientId=client)]
-    links = sorted({s.link for s in shapes})
     frame = np.array([s.link + 1 for s in shapes], dtype=int)
     offset = np.array([s.R_local @ s.centre + s.p_local for s in shapes]).reshape(-1, 3)
     radius = np.array([s.radius for s in shapes], dtype=float)
-    return BodyShapes(body, shapes, links, n, frame, offset, radius)
+    return BodyShapes(body, shapes, n, frame, offset, radius)
 
 
 class ExactDistances:
