@@ -57,9 +57,26 @@ def check_config(config: Chan2011Config) -> None:
         raise ConfigError(f"dcc=True needs obstacles; setting {config.setting!r} has none")
 
 
+def same_branch(q_a: np.ndarray, q_b: np.ndarray) -> bool:
+    """Whether two CRS-A465 configurations lie on one inverse-kinematics branch: the elbow
+    (q3) and the wrist (q5) bent the same way and no joint more than 180 deg apart (the
+    shoulder flip q1 + 180 deg, q2 -> -q2 reaches the same point from the other side)."""
+    return bool(np.sign(q_a[2]) == np.sign(q_b[2]) and np.sign(q_a[4]) == np.sign(q_b[4])
+                and np.all(np.abs(q_a - q_b) < np.pi))
+
+
 def _goal_configuration(robot: Robot, setting: sc.Setting) -> np.ndarray:
-    """An IK solution for the goal flange pose (seeded, deterministic)."""
+    """An IK solution for the goal flange pose (deterministic): seeded at the start when
+    ``setting.goal_from_start`` (and then on the start's branch), else the first of seeded
+    random starts."""
     T_goal = sc.goal_flange_pose(setting)
+    if setting.goal_from_start:
+        q0 = np.deg2rad(setting.q0_deg)
+        q = solve_ik(robot, "flange", T_goal, q0, 300)
+        if not same_branch(q, q0):
+            raise ReproError(f"the goal's IK solution {np.rad2deg(q).round(1).tolist()} deg "
+                             f"is on another branch than the start {setting.q0_deg}")
+        return q
     rng = np.random.default_rng(0)
     for _ in range(200):
         try:
@@ -214,7 +231,8 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
                     "true camera optical frame (x right, y down, z forward); the controller "
                     "uses T_FLANGE_CAMERA without the mounting error")
     rig = CameraRig("camera", "p", Camera(sc.TRUE_INTRINSICS, mode=config.camera_mode), robot,
-                    "flange", T_FLANGE_CAMERA @ sc.T_MOUNT_ERROR, "conrod_dots")
+                    "flange", T_FLANGE_CAMERA @ sc.T_MOUNT_ERROR, "conrod_dots",
+                    log_view_angle=True)
     q_goal = _goal_configuration(robot, setting)
     # The reference image: what the real camera sees at the goal (Fig. 2 / Fig. 3 'x').
     T_goal_cam = rig.pose(q_goal)
@@ -234,7 +252,8 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
         nmpc = VisualNMPC(fk, sc.CONTROLLER_INTRINSICS, N, CRS_LIMITS.q_min, CRS_LIMITS.q_max,
                           qd_max, NMPCConfig(Np=config.Np, dt=config.dt, Q_weight=config.Q_weight,
                                              W_weight=config.W_weight, solver=config.nlp_solver,
-                                             qpsol=config.qpsol, max_iter=config.nlp_max_iter),
+                                             qpsol=config.qpsol, max_iter=config.nlp_max_iter,
+                                             fov_margin=config.fov_margin),
                           image_bounds=sc.CONTROLLER_IMAGE_BOUNDS)
     # issue 17: the links no joint moves (the base) are left out of d(q); their fixed
     # 0.19 m to the books capped d(q) at every configuration (the ground-truth audit keeps them)

@@ -106,6 +106,10 @@ class CameraRig:
     target: str
     tol_px: float = 2.0
     period: int = 1
+    #: log ``<prefix><i>_view_deg``, each dot's viewing angle (a flat dot seen edge-on images
+    #: as a sliver and is lost; chan2011 issue 17). Off by default: the other papers' plate
+    #: targets would change their committed traces' columns
+    log_view_angle: bool = False
 
     def pose(self, q: np.ndarray) -> np.ndarray:
         """T_world_camera (4x4) at joint positions ``q`` of the carrying robot."""
@@ -288,6 +292,11 @@ def runner_columns(ep: Episode) -> Columns:
                  n=n, audit=True)
         cols.add(f"{s}{{i}}_err_px", "px", "audit: distance between detection and exact "
                  "projection of point {i} (NaN if not found)", n=n, audit=True)
+        if cam.log_view_angle:
+            cols.add(f"{s}{{i}}_view_deg", "deg", "audit: viewing angle of dot {i}: between "
+                     "its normal (the target body's z axis; every dot faces +z) and the "
+                     "direction from the dot to the true camera centre (90 = edge-on; > 90: "
+                     "seen from behind)", n=n, audit=True)
         cols.add(f"{cam.name}_render_s", "s", f"{cam.name}: wall time of render + detection")
         if cam.camera.window is not None:
             cols.add(f"{cam.name}_frame", "text", f"{cam.name}: what this frame rendered: "
@@ -437,6 +446,10 @@ class _Runner:
         uv_true, _ = project_points(cam.camera.intrinsics, T_wc, P)
         visible = _visible(scene, T_wc, P, body.T_world[:3, 2], uv_true, Z, cam.camera)
         err = np.where(found, np.linalg.norm(uv - uv_true, axis=1), np.nan)
+        if cam.log_view_angle:
+            to_cam = T_wc[:3, 3] - P
+            cos = (to_cam @ body.T_world[:3, 2]) / np.linalg.norm(to_cam, axis=1)
+            view_deg = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
         a = self.audit[cam.name]
         with np.errstate(invalid="ignore"):
             bad = found & ~(err <= cam.tol_px)
@@ -452,6 +465,8 @@ class _Runner:
             row[f"{s}_u_true"], row[f"{s}_v_true"] = float(uv_true[i, 0]), float(uv_true[i, 1])
             row[f"{s}_visible"] = bool(visible[i])
             row[f"{s}_err_px"] = float(err[i])
+            if cam.log_view_angle:
+                row[f"{s}_view_deg"] = float(view_deg[i])
             if bad[i]:
                 a.points_mismatched.add(j)
             if hidden[i]:
