@@ -20,7 +20,11 @@ from repro.control.proximity_features import (
     L_delta_beta1,
     L_delta_coarse,
     L_delta_exact,
+    SOURCE_FIT,
+    SOURCE_HELD,
+    SOURCE_NONE,
     NormalEstimator,
+    NormalEstimatorConfig,
     fit_plane_normal,
     ring_interaction_matrix,
 )
@@ -443,27 +447,34 @@ def test_fit_plane_normal_needs_two_points() -> None:
     assert fit_plane_normal(np.array([[0.3, 0.1, 0.0], [0.3, -0.1, 0.0]])) is not None
 
 
-def _estimator_run(steps: int, seed: int, tilt_deg: float = 35.0
+def _estimator_run(steps: int, seed: int, tilt_deg: float = 35.0, still: int = 0,
+                   noise_std: float = 0.0, est_out: list | None = None
                    ) -> tuple[list[np.ndarray], np.ndarray, int]:
-    """Move a ring along its axis past a tilted wall, 1 cm per step; return the estimated
-    normals after each step, the true normal n_T (ring frame) and the facing sensor."""
+    """Move a ring along its axis past a tilted wall, 1 cm per step, then hold it still for
+    ``still`` steps; return the estimated normals after each step, the true normal n_T
+    (ring frame) and the facing sensor. ``est_out`` receives (source, spread, cond) per
+    step."""
     rng = np.random.default_rng(seed)
-    ring = _ring()
+    ring = _ring(noise_std=noise_std, seed=seed)
     n_S = ring.spec.directions()
-    est = NormalEstimator(n_S, RADIUS)
+    est = NormalEstimator(n_S, RADIUS, NormalEstimatorConfig(range_noise=noise_std))
     with World() as world:
         T0, n_T, i0, _ = _tilted_wall_setup(world, rng, tilt_deg)
         assert np.all(np.isnan(est.normals()))  # nothing before the first update
         out = []
-        for k in range(steps):
-            T = T0 @ make_T(t=(0.0, 0.0, 0.01 * k))
+        for k in range(steps + still):
+            T = T0 @ make_T(t=(0.0, 0.0, 0.01 * min(k, steps - 1)))
             rd = ring.read(world.client, T)
             assert rd.detected[i0]
+            # the ground-truth normal of the ray cast (audit): the wall's, facing the sensor
+            np.testing.assert_allclose(T[:3, :3].T @ rd.true_normal[i0], n_T, atol=1e-5)
             est.update(T, rd.delta, rd.detected)
             N = est.normals()
             assert N.shape == (M, 3)
             assert np.all(np.isnan(N[~rd.detected]))
             out.append(N)
+            if est_out is not None:
+                est_out.append((est.source.copy(), est.spread.copy(), est.cond.copy()))
     return out, n_T, i0  # pure translation along z: n_T is the same in every ring frame
 
 
@@ -475,16 +486,45 @@ def test_normal_estimator_converges_on_a_tilted_wall() -> None:
             np.testing.assert_allclose(np.linalg.norm(N[i0]), 1.0)
 
 
-def test_normal_estimator_single_step_is_in_plane() -> None:
-    """With one scan only (collinear points in the ring plane) the estimate is the
-    in-plane normal: the true n_T projected on the ring plane and normalised (not NaN,
-    as long as it faces the sensor)."""
+def test_normal_estimator_single_step_is_degenerate_and_not_used() -> None:
+    """One scan only: the points are collinear (the ring plane cuts the wall along a line),
+    eq. (4) would return the in-plane normal (wrong for a tilted wall); the fit is flagged
+    degenerate (its least extent ~0) and the sensor falls back to the coarse row (NaN)."""
     for seed in (40, 41, 42):
-        (N,), n_T, i0 = _estimator_run(1, seed)
-        in_plane = np.array([n_T[0], n_T[1], 0.0])
-        in_plane /= np.linalg.norm(in_plane)
-        np.testing.assert_allclose(N[i0], in_plane, atol=1e-6)
-        assert _angle_deg(N[i0], n_T) > 1.0  # hence wrong for a wall tilted out of plane
+        info: list = []
+        (N,), n_T, i0 = _estimator_run(1, seed, est_out=info)
+        assert np.all(np.isnan(N[i0]))
+        src, spread, cond = info[0]
+        assert src[i0] == SOURCE_NONE and spread[i0] < 1e-6 and cond[i0] > 1e8
+
+
+def test_a_still_ring_holds_its_last_well_posed_normal() -> None:
+    """Issue 17 item 6: after moving past the wall the ring stands still; its history
+    collapses onto one line (the old estimator then returned the in-plane normal, 20-36 deg
+    off). The estimate stays the last well-posed fit, flagged as held."""
+    for seed in (40, 41, 42):
+        info: list = []
+        history, n_T, i0 = _estimator_run(6, seed, still=40, est_out=info)
+        for N in history[2:]:
+            assert _angle_deg(N[i0], n_T) < 2.0, seed
+        sources = [src[i0] for src, _, _ in info]
+        assert sources[-1] == SOURCE_HELD and SOURCE_FIT in sources[:6]
+        assert all(sp[i0] < 1e-6 for src, sp, _ in info if src[i0] == SOURCE_HELD)
+
+
+def test_with_range_noise_a_still_ring_never_uses_a_fit_on_noise() -> None:
+    """With the suite's 2 mm noise a still ring's points spread by the noise only: no fit
+    with a least extent under 3 sigma is used (held or coarse instead)."""
+    sigma = 0.002
+    for seed in (40, 41, 42):
+        info: list = []
+        history, n_T, i0 = _estimator_run(6, seed, still=30, noise_std=sigma, est_out=info)
+        for (src, spread, _), N in zip(info, history, strict=True):
+            if src[i0] == SOURCE_FIT:
+                assert spread[i0] >= 3 * sigma
+            if src[i0] == SOURCE_NONE:
+                assert np.all(np.isnan(N[i0]))
+        assert all(src[i0] != SOURCE_FIT for src, _, _ in info[-10:])  # still: no new fit
 
 
 # --------------------------------------------------------------------------- issue 17: cone

@@ -21,8 +21,10 @@ def ring_columns(ring: int, kind: str) -> list[str]:
     return [f"r{ring}_{kind}{i}" for i in range(1, N_SENSORS + 1)]
 
 
-def declare_columns(n_joints: int, proximity: bool) -> Columns:
-    """The controller's columns (ring sensor columns are declared by the rings)."""
+def declare_columns(n_joints: int, proximity: bool, estimated: tuple[int, ...] = ()
+                    ) -> Columns:
+    """The controller's columns (ring sensor columns are declared by the rings);
+    ``estimated``: the 1-based rings whose model uses estimated normals (their audit)."""
     cols = Columns()
     cols.add("e{i}_u", "px", "IBVS error of point {i} along u: fu (x - x*) (NaN if a dot is "
              "lost)", n=N_POINTS)
@@ -41,4 +43,17 @@ def declare_columns(n_joints: int, proximity: bool) -> Columns:
     cols.add("qp_max_slack", "m/s", "largest slack of the relaxed CBF rows (0 when hard)")
     cols.add("qp_solve_s", "s", "solver time of the QP solves of this step")
     cols.add("grad_L0", "-", "||grad_u L(0, kappa*)||, the Lagrangian stop test of Sec. III-C")
+    for k in estimated:  # issue 17 item 6 (repro.control.proximity_features.NormalEstimator)
+        cols.add(f"r{k}_ncond{{i}}", "-", f"audit: ring {k} sensor {{i}}: cond(B) of the "
+                 "normal fit, eq. (4) (NaN: not detecting, nothing fitted)", n=N_SENSORS,
+                 audit=True)
+        cols.add(f"r{k}_nspread{{i}}", "m", f"audit: ring {k} sensor {{i}}: the fit's least "
+                 "RMS extent sqrt(lambda_min(B) / count); under 3 x the range noise (1e-6 m "
+                 "noise-free) the fit is degenerate and not used", n=N_SENSORS, audit=True)
+        cols.add(f"r{k}_nsrc{{i}}", "-", f"ring {k} sensor {{i}}: the normal the model used: "
+                 "0 none (the coarse row (6)), 1 this step's fit, 2 the last well-posed fit "
+                 "held (world-fixed) over a degenerate one", n=N_SENSORS)
+        cols.add(f"r{k}_nerr{{i}}", "deg", f"audit: ring {k} sensor {{i}}: angle between the "
+                 "normal used and the true surface normal at the noise-free hit (NaN: none "
+                 "used or nothing hit)", n=N_SENSORS, audit=True)
     return cols

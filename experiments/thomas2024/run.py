@@ -17,7 +17,11 @@ from experiments.thomas2024.columns import declare_columns
 from experiments.thomas2024.config import RING_MODELS, Thomas2024Config
 from repro.config import validate
 from repro.control.cbf_qp import CBFQPController, Inequalities, cbf_inequalities, ibvs_objective
-from repro.control.proximity_features import NormalEstimator, ring_interaction_matrix
+from repro.control.proximity_features import (
+    NormalEstimator,
+    NormalEstimatorConfig,
+    ring_interaction_matrix,
+)
 from repro.errors import ConfigError, UnknownChoiceError
 from repro.geometry import inv_T
 from repro.sensors.camera import Camera, check_scene_colors, project_points
@@ -68,6 +72,9 @@ class StepOutput:
     solve_s: float
     max_slack: float
     qp_status: str
+    #: per ring, the (m, 3) normals the interaction matrix used (ring frame; NaN rows: the
+    #: coarse model (6)), None for a ring on the coarse model
+    normals: tuple[np.ndarray | None, ...] = ()
 
 
 class Thomas2024Controller:
@@ -109,6 +116,7 @@ class Thomas2024Controller:
         x = sc.INTRINSICS.to_normalized(uv)
         e_4p = (x - self.s_star).ravel()
         A, b = np.empty((m, n)), np.empty(m)
+        used: list[np.ndarray | None] = [None] * len(self.rings)
         if cfg.proximity:
             row = 0
             for k, (ring, reading) in enumerate(zip(self.rings, readings, strict=True)):
@@ -116,6 +124,7 @@ class Thomas2024Controller:
                 if L is None:
                     normals = (self.estimators[k].normals() if cfg.ring_models[k] != "coarse"
                                else None)
+                    used[k] = normals
                     L = ring_interaction_matrix(self.dirs[k], reading.delta, ring.spec.radius,
                                                 cfg.ring_models[k], normals)
                 link = sc.RING_PARENTS[ring.spec.name][0]
@@ -133,7 +142,31 @@ class Thomas2024Controller:
                            self.qd_max)
         return StepOutput(res.u, res.status, e_4p, res.kappa, res.grad_L0,
                           res.iterations, res.solve_time_s,
-                          float(res.slack.max()) if m else 0.0, res.qp_status)
+                          float(res.slack.max()) if m else 0.0, res.qp_status, tuple(used))
+
+    def normal_columns(self, out: StepOutput, readings: list[RingReading]
+                       ) -> dict[str, float | int]:
+        """Audit of the normal estimates (issue 17 item 6), rings that use them: cond(B),
+        the fit's least extent, where each normal came from, its angle to the true one."""
+        cols: dict[str, float | int] = {}
+        for k, est in enumerate(self.estimators):
+            if self.config.ring_models[k] == "coarse" or not self.config.proximity:
+                continue
+            used = out.normals[k] if k < len(out.normals) else None
+            mS = self.rings[k].spec.n_sensors
+            ang = np.full(mS, np.nan)
+            true, T = readings[k].true_normal, est.T_world_ring
+            if used is not None and true is not None and T is not None:
+                with np.errstate(invalid="ignore"):
+                    ang = np.degrees(np.arccos(np.clip(
+                        np.einsum("ij,ij->i", used @ T[:3, :3].T, true), -1.0, 1.0)))
+            for i in range(mS):
+                pre = f"r{k + 1}_"
+                cols[f"{pre}ncond{i + 1}"] = float(est.cond[i])
+                cols[f"{pre}nspread{i + 1}"] = float(est.spread[i])
+                cols[f"{pre}nsrc{i + 1}"] = int(est.source[i]) if used is not None else 0
+                cols[f"{pre}nerr{i + 1}"] = float(ang[i])
+        return cols
 
     def __call__(self, obs: Observation) -> StepResult:
         cfg, f = self.config, obs.features["camera"]
@@ -164,8 +197,16 @@ class Thomas2024Controller:
             cols[f"r{i // sc.N_SENSORS + 1}_kappa{i % sc.N_SENSORS + 1}"] = float(kap)
         cols.update(qp_status=out.status, qp_iter=out.iterations, qp_max_slack=out.max_slack,
                     qp_solve_s=out.solve_s, grad_L0=out.grad_L0)
+        cols.update(self.normal_columns(out, [obs.sensors[name] for name in RING_NAMES]))
         return StepResult({"panda": out.u}, cols, events, stop,
                           fallback=out.status in ("failed", "no_features"))
+
+
+def estimated_rings(config: Thomas2024Config) -> tuple[int, ...]:
+    """1-based rings whose interaction matrix uses estimated normals (not model (6))."""
+    if not config.proximity:
+        return ()
+    return tuple(k + 1 for k, m in enumerate(config.ring_models) if m != "coarse")
 
 
 def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024Controller]:
@@ -203,7 +244,8 @@ def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024C
     rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(config.seed).spawn(2)]
     specs = sc.ring_specs(config.max_range, config.proximity_noise)
     rings = [ProximityRing(s, r) for s, r in zip(specs, rngs, strict=True)]
-    estimators = [NormalEstimator(s.directions(), s.radius) for s in specs]
+    estimators = [NormalEstimator(s.directions(), s.radius,
+                                  NormalEstimatorConfig(range_noise=s.noise_std)) for s in specs]
     sensors = [RingSensor(ring, robot, ring.spec.name, scene.physics.client, f"r{k + 1}_",
                           config.thresholds[k],
                           lambda T, r, est=est: est.update(T, r.delta, r.detected))
@@ -223,7 +265,8 @@ def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024C
                                 case.target.points_target)
     scene.extra.update(desired_features_px=uv_star, q_goal_deg=case.q_goal_deg)
     ep = Episode(scene, {"panda": VelocityDrive(robot)}, ctrl,
-                 declare_columns(robot.n, config.proximity), config.duration, cameras=[rig],
+                 declare_columns(robot.n, config.proximity, estimated_rings(config)),
+                 config.duration, cameras=[rig],
                  sensors=sensors, movers=movers, video=config.video,
                  view=View((0.35, 0.0, 0.5), 1.6, 50, -25))
     for s in sensors:

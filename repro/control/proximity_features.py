@@ -124,6 +124,17 @@ class NormalEstimatorConfig:
             taken to belong to another object [m].  # ours
         min_facing: an estimate with n_T . n_S > -min_facing is rejected (a
             surface seen edge-on or from behind) and the coarse normal is used.
+        range_noise: standard deviation of the range readings [m] (the ring's noise_std):
+            sets the degeneracy test below.
+        spread_sigmas: a fit is degenerate when its points' least RMS extent,
+            ``sqrt(lambda_min(B) / count)``, is under ``spread_sigmas`` range-noise
+            standard deviations (or under ``spread_floor`` when the ring is noise-free):
+            in that direction the points are noise, so the plane through them is not
+            determined (a still ring's points lie on one line: the ring plane cuts the
+            surface along it, and eq. (4) then returns a normal in the ring plane).
+            # ours: 3 sigma, the usual gate for "distinguishable from noise"
+        spread_floor: the least extent of a noise-free fit [m].
+            # ours: 1e-6 m, 30x the float32 resolution of a ray-cast hit at 1 m range
     """
 
     history: int = 15
@@ -131,6 +142,18 @@ class NormalEstimatorConfig:
     min_separation: float = 0.005
     max_separation: float = 0.12
     min_facing: float = 0.2
+    range_noise: float = 0.0
+    spread_sigmas: float = 3.0
+    spread_floor: float = 1e-6
+
+    @property
+    def min_spread(self) -> float:
+        """The least RMS extent [m] of a well-posed fit."""
+        return max(self.spread_sigmas * self.range_noise, self.spread_floor)
+
+
+#: Where a sensor's normal came from (:attr:`NormalEstimator.source`).
+SOURCE_NONE, SOURCE_FIT, SOURCE_HELD = 0, 1, 2
 
 
 class NormalEstimator:
@@ -138,6 +161,14 @@ class NormalEstimator:
 
     Call :meth:`update` once per control step with the ring pose and reading,
     then :meth:`normals` for the (m, 3) estimates in the current ring frame.
+
+    A degenerate fit (see :class:`NormalEstimatorConfig`: its points do not span a plane)
+    is not used: the sensor keeps its last well-posed normal, held fixed in the world
+    (the obstacle does not turn) for as long as the sensor keeps detecting, and falls back
+    to the coarse model (6) (a NaN row) when it never had one. After :meth:`normals`,
+    :attr:`cond` (cond(B) of eq. (4)), :attr:`spread` (the least RMS extent [m]) and
+    :attr:`source` (SOURCE_NONE / SOURCE_FIT / SOURCE_HELD) describe every sensor's
+    estimate (NaN / SOURCE_NONE where nothing was fitted).
     """
 
     def __init__(self, n_S: np.ndarray, radius: float,
@@ -149,6 +180,16 @@ class NormalEstimator:
         # points in their ring frame (K, m, 3), detection flags (K, m); None before any.
         self._past: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._current: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        m = n_S.shape[0]
+        self._held = np.full((m, 3), np.nan)  # last well-posed normal per sensor, world frame
+        self.cond = np.full(m, np.nan)
+        self.spread = np.full(m, np.nan)
+        self.source = np.zeros(m, dtype=int)
+
+    @property
+    def T_world_ring(self) -> np.ndarray | None:
+        """The ring pose of the last :meth:`update` (None before any)."""
+        return None if self._current is None else self._current[0]
 
     def update(self, T_world_ring: np.ndarray, delta: np.ndarray, detected: np.ndarray) -> None:
         """Store this step's detections: points (delta + r) n_S in the ring frame."""
@@ -178,10 +219,12 @@ class NormalEstimator:
         """
         m = self.n_S.shape[0]
         out = np.full((m, 3), np.nan)
+        self.cond[:], self.spread[:], self.source[:] = np.nan, np.nan, SOURCE_NONE
         if self._current is None:
             return out
         cfg = self.config
         T_now, pts_now, det_now = self._current
+        self._held[~det_now] = np.nan  # a sensor that lost its obstacle forgets its normal
         if not np.any(det_now):
             return out
         T_now_inv = np.linalg.inv(T_now)
@@ -209,9 +252,23 @@ class NormalEstimator:
         count = w.sum(axis=(0, 2))
         n_plane = np.einsum("sab,sb->sa", np.linalg.pinv(B, rcond=1e-6), b)
         norm = np.linalg.norm(n_plane, axis=1)
-        good = (count >= 2) & np.isfinite(norm) & (norm > 1e-12)
+        eig = np.linalg.eigvalsh(B)  # ascending, per sensor
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # capped at 1e16 (double precision): a singular B has eig[:, 0] <= 0
+            self.cond[sensors] = eig[:, -1] / np.maximum(eig[:, 0], 1e-16 * eig[:, -1])
+            spread = np.sqrt(np.maximum(eig[:, 0], 0.0) / count)
+        self.spread[sensors] = spread
+        posed = spread >= cfg.min_spread  # NaN (count 0) is not
+        good = (count >= 2) & np.isfinite(norm) & (norm > 1e-12) & posed
         n_T = -n_plane / np.where(good, norm, 1.0)[:, None]  # n_T faces the sensor
         facing = np.einsum("sa,sa->s", n_T, self.n_S[sensors]) <= -cfg.min_facing
         good &= facing
         out[sensors[good]] = n_T[good]
+        self.source[sensors[good]] = SOURCE_FIT
+        R = T_now[:3, :3]
+        self._held[sensors[good]] = n_T[good] @ R.T
+        # a degenerate fit keeps the sensor's last well-posed normal (world-fixed)
+        hold = sensors[~good & ~np.isnan(self._held[sensors, 0])]
+        out[hold] = self._held[hold] @ R
+        self.source[hold] = SOURCE_HELD
         return out

@@ -122,6 +122,9 @@ class RingReading:
             columns only; max_range when nothing is hit); None when not known.
         failed: (m,) True where the sensor has given ``max_consecutive_faults`` or more
             non-finite readings in a row (see :class:`ProximityRing`); None: no fault policy.
+        true_normal: (m, 3) unit surface normal at the noise-free hit, world frame
+            (PyBullet's hit normal, facing the sensor; for a cone its nearest ray's), NaN rows
+            where nothing is hit; ground truth for the audit columns only; None: not known.
     """
 
     delta: np.ndarray
@@ -130,6 +133,7 @@ class RingReading:
     invalid: np.ndarray
     true_delta: np.ndarray | None = None
     failed: np.ndarray | None = None
+    true_normal: np.ndarray | None = None
 
 
 class ProximityRing:
@@ -165,6 +169,8 @@ class ProximityRing:
         self._cone = (cone[None, :, 0:1] * self._dirs[:, None, :]
                       + cone[None, :, 1:2] * y[:, None, :] + cone[None, :, 2:3] * z)
         self._last_valid = np.full(spec.n_sensors, spec.max_range)
+        #: world-frame hit normals of the last :meth:`cast` (NaN rows: no hit; ground truth)
+        self.last_normals = np.full((spec.n_sensors, 3), np.nan)
         self.fault_value = fault_value
         self.max_consecutive_faults = int(max_consecutive_faults)
         self._fault_run = np.zeros(spec.n_sensors, dtype=int)
@@ -181,6 +187,8 @@ class ProximityRing:
             )
             frac = np.array([h[2] if h[0] >= 0 else 1.0 for h in hits])
             body = np.array([h[0] for h in hits], dtype=int)
+            self.last_normals = np.array([h[4] if h[0] >= 0 else (np.nan,) * 3 for h in hits],
+                                         dtype=float).reshape(-1, 3)
             return frac * self.spec.max_range, body
         return self._cast_cone(client, R, start)
 
@@ -200,6 +208,9 @@ class ProximityRing:
         nearest = np.where(hit, d, np.inf).argmin(axis=1)
         rows = np.arange(m)
         out_body = np.where(hit.any(axis=1), body[rows, nearest], -1)
+        normals = np.array([h[4] if h[0] >= 0 else (np.nan,) * 3 for h in hits],
+                           dtype=float).reshape(m, k, 3)
+        self.last_normals = np.where(hit.any(axis=1)[:, None], normals[rows, nearest], np.nan)
         if self.spec.cone_return == "nearest":
             out = np.where(hit.any(axis=1), d[rows, nearest], self.spec.max_range)
         else:
@@ -217,7 +228,7 @@ class ProximityRing:
         """
         dist, body = self.cast(client, T_world_ring)
         reading = self.sanitize(dist, body)
-        return dataclasses.replace(reading, true_delta=dist)
+        return dataclasses.replace(reading, true_delta=dist, true_normal=self.last_normals)
 
     def sanitize(self, dist: np.ndarray, body: np.ndarray) -> RingReading:
         """Apply noise, range limits and the fault policy to raw distances [m]."""
