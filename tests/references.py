@@ -118,7 +118,9 @@ GAINS = {
     # (the Jacobian sign and the one-step delay still must)
     "chan2011/ibvs_saturated": (),
     "chan2011/dcc_audit": ("max_step",),  # no loop: the largest joint change of a segment
-    "pomares2011": ("rvc_gain", "omega_max"),  # the PA-10's RVC law, the mini-robot's loop
+    # the PA-10's RVC law and the mini-robot's loop (its damping: omega_max is 0, the gain
+    # rule, by default; a 1 % zeta changes K_v by 1 %)
+    "pomares2011": ("rvc_gain", "zeta"),
     "pomares2011/exp1_indirect": ("rvc_gain", "indirect_gain"),
     "pomares2011/exp3": ("closing_speed_deg_s",),  # the fingers' closing
 }

@@ -51,7 +51,7 @@ def _exp2(active_span: tuple[float, float] = (9.7, 14.6), **kw: object) -> pd.Da
     df = _exp1()
     act = (T >= active_span[0]) & (T < active_span[1])
     df["secondary_active"] = act
-    df["e_f1y_px"] = np.where(act, 0.5, 8.0)
+    df["e_f2y_px"] = np.where(act, 0.5, 8.0)
     df["dist_m"] = np.where(act, 0.2, 0.5)
     for a in "xyz":
         df[f"camera_{a}"] = np.where(act, 0.05, 0.0)
@@ -142,9 +142,9 @@ def test_claim_4_fails_on_each_clause() -> None:
     res = cl.check_4(_runs(d_arm=-0.001))
     assert res.status == "not_reproduced" and "dist > 0" in res.measured
     f1y = _exp2()
-    f1y.loc[(T > 10) & (T < 10.5), "e_f1y_px"] = 30.0
+    f1y.loc[(T > 10) & (T < 10.5), "e_f2y_px"] = 30.0
     res = cl.check_4(_runs(exp2=f1y))
-    assert res.status == "not_reproduced" and "f1y stays" in res.measured
+    assert res.status == "not_reproduced" and "held coordinate (f2y) stays" in res.measured
     res = cl.check_4(_runs(exp2=_exp2(e_s_px=np.full(N, 20.0))))
     assert res.status == "not_reproduced" and "s -> s*" in res.measured
     res = cl.check_4(_runs(exp2=_exp2(active_span=(9.7, 30.0))))  # the human never leaves

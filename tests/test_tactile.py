@@ -286,7 +286,8 @@ def test_saturation_and_quantisation(client: int, tmp_path: Path) -> None:
     assert np.all(np.abs(pr.pressure[ok] - pr.pressure_true[ok]) <= 0.5 * PRESSURE_STEP_KPA + 1e-9)
     assert np.any((pr.pressure_true > 0) & (pr.pressure == 0))  # below 0.35 kPa reads 0
     kinds = [k for k, _ in sensor.events(r)]
-    assert kinds == ["tactile_saturated"]
+    # the clipped map carries less than the link feels: the coverage audit says so too
+    assert kinds == ["tactile_saturated", "tactile_coverage_low"]
     assert sensor.failure(r) is None
 
 
@@ -419,7 +420,8 @@ def test_barrett_layout_counts_and_areas() -> None:
         c, h = lay.centres(), 0.5 * lay.sizes()
         lo, hi = (c - h).min(axis=0), (c + h).max(axis=0)
         np.testing.assert_allclose((hi - lo) * 1e3, foot_mm, err_msg=name)
-        np.testing.assert_allclose(0.5 * (hi + lo), 0.0, atol=1e-12, err_msg=name)
+        centre = (0.0075, 0.0) if name == "distal" else (0.0, 0.0)  # issue 17 item 8
+        np.testing.assert_allclose(0.5 * (hi + lo), centre, atol=1e-12, err_msg=name)
         gap = np.abs(c[:, None] - c[None]) - (h[:, None] + h[None])  # < 0 in x and y: overlap
         overlap = np.all(gap < -1e-9, axis=2) & ~np.eye(n, dtype=bool)
         assert not overlap.any(), name
@@ -428,8 +430,19 @@ def test_barrett_layout_counts_and_areas() -> None:
         assert img[1, 0] == shape[1]  # row-major: the next row starts after cols cells
     # the distal tip cell continues the middle column towards the fingertip (+x)
     tip = BH8_DISTAL.centres()[21]
-    np.testing.assert_allclose(tip, [0.021, 0.0])
+    np.testing.assert_allclose(tip, [0.0285, 0.0])
     assert tip[0] > BH8_DISTAL.centres()[:21, 0].max()
+
+
+def test_distal_pad_ends_where_the_finger_ends() -> None:
+    """Issue 17 item 8: GraspIt's distal cells end at its link-3 frame, the distal link's end
+    (DH a = 55 mm): ours end at our finger's end, A3 + tip radius from the distal axis (the
+    pad frame sits at the distal box's face centre)."""
+    from repro.sim.barrett import BH8_A3, BH8_GEOMETRY
+
+    c, h = BH8_DISTAL.centres(), 0.5 * BH8_DISTAL.sizes()
+    far_end = BH8_GEOMETRY.distal_box[0] / 2 + float((c + h)[:, 0].max())
+    assert far_end == pytest.approx(BH8_A3 + BH8_GEOMETRY.tip_radius, abs=1e-12)
 
 
 def test_bh8_pads_and_tactel_row() -> None:
@@ -494,3 +507,37 @@ def test_non_finite_contacts_are_events_then_a_failure(client: int, tmp_path: Pa
         assert (sensor.failure(r) is None) == (n < 2)
     monkeypatch.undo()
     assert sensor.failure(sensor.sample(0.1)) is None
+
+
+# ------------------------------------------------------- issue 17 item 8: coverage audit
+def test_coverage_is_one_on_the_cells_and_low_off_them(client: int, tmp_path: Path) -> None:
+    """A block resting on the palm's cells: the map carries the link's force (coverage ~1,
+    no event). The same block resting on the finger's face beyond the cells: the link
+    feels it, the map does not (coverage ~0, a tactile_coverage_low event, then its end when
+    the block is lifted off)."""
+    finger = _finger(client, tmp_path, (0.08, 0.04, 0.01))
+    mp = _palm(client, finger)
+    sensor = TactileSensor(client, [mp])
+    blk = _block(client, (0.01, 0.01, 0.005), 0.2, 0.0, 0.0, z_support=0.01)
+    _settle(client)
+    r = sensor.sample(0.0)
+    pr = r.pads["palm"]
+    assert pr.force_link == pytest.approx(0.2 * G, rel=0.01)
+    assert pr.coverage == pytest.approx(1.0, abs=0.05)
+    assert [k for k, _ in sensor.events(r)] == []
+    # the block moved to the face beyond the 60 mm palm grid (x = 0.065 m)
+    p.resetBasePositionAndOrientation(blk, [0.065, 0.0, 0.0151], [0, 0, 0, 1],
+                                      physicsClientId=client)
+    _settle(client)
+    r = sensor.sample(0.1)
+    pr = r.pads["palm"]
+    assert pr.force_link == pytest.approx(0.2 * G, rel=0.01) and pr.coverage < 0.1
+    assert [k for k, _ in sensor.events(r)] == ["tactile_coverage_low"]
+    assert sensor.events(sensor.sample(0.2)) == []  # an onset, not every sample
+    p.removeBody(blk, physicsClientId=client)
+    p.stepSimulation(physicsClientId=client)
+    r = sensor.sample(0.3)
+    assert np.isnan(r.pads["palm"].coverage)  # nothing to judge
+    assert [k for k, _ in sensor.events(r)] == ["tactile_coverage_low_end"]
+    cols = sensor.columns(r)
+    assert {"tac_palm_Flink", "tac_palm_coverage"} <= set(cols)

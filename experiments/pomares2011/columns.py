@@ -31,10 +31,13 @@ def declare_columns(human: bool = False) -> Columns:
     cols.add("arm_reached", "bool", "the RVC error fell under arm_stop_px: the PA-10 "
              "stopped for good (end of the approach)")
     cols.add("e_s_px", "px", "RMS distance of the camera's detected points to s*")
-    cols.add("e_f1y_px", "px", "f1y - f1y* = v of detected point 1 minus 272 px: the one "
-             "row the primary task keeps while the human is within dmin (Sec. 7.2)")
-    cols.add("V", "J", "Lyapunov function (10): 1/2 qd^T M qd + 1/2 e_s^T K_P e_s of the "
-             "mini-robot")
+    cols.add("e_f2y_px", "px", "f2y - 272 px: v of detected point 2 minus its s* value, "
+             "272 px: the one row the primary task keeps while the human is within dmin "
+             "(Sec. 7.2's f*_1py = 272 px, read as f2y: scene.PRIMARY_TASK_ROW)")
+    cols.add("V", "J", "Lyapunov function (10): 1/2 qd^T M qd + 1/2 k_P e_s^T e_s of the "
+             "mini-robot: qd its joint velocities, M its block of the chain's joint-space "
+             "inertia (pinocchio CRBA of the run's URDF at the measured q), e_s = s* - s over "
+             "the rows in use [px], k_P of the gain_rule event")
     cols.add("e2", "-", "secondary task (17), alpha (1 - dist/dmin) when dist < dmin, else 0")
     cols.add("secondary_active", "bool", "the human is within dmin: primary task reduced")
     for a in "xyz":
@@ -45,6 +48,17 @@ def declare_columns(human: bool = False) -> Columns:
     cols.add("vvs_converged", "bool", "the VVS stopped on its tolerance, not its budget")
     cols.add("vvs_pos_err_m", "m", "audit: distance between the VVS and the true object "
              "position in the camera frame", audit=True)
+    cols.add("vvs_rot_err_deg", "deg", "audit: rotation angle between the VVS and the true "
+             "object orientation in the mini-robot camera frame", audit=True)
+    for pre, what in (("vvs_", "the VVS estimate of"), ("vvs_true_", "audit: the true")):
+        for a in ("x", "y", "z"):
+            cols.add(f"{pre}{a}", "m", f"{what} the object pose in the mini-robot camera "
+                     f"frame (mini_camera_optical): position {a} (last frame)",
+                     audit=pre == "vvs_true_")
+        for a in ("qx", "qy", "qz", "qw"):
+            cols.add(f"{pre}{a}", "-", f"{what} the object pose in the mini-robot camera "
+                     f"frame: orientation quaternion {a} (PyBullet order x, y, z, w)",
+                     audit=pre == "vvs_true_")
     if human:
         cols.add("dist_m", "m", "dist of eq. (17), sampled every tracker_period control steps "
                  "and held: minimum python-fcl distance between the tracked human capsules "

@@ -36,8 +36,10 @@ class Pomares2011Config:
     arm_stop_px: float = param(1.0, unit="px", range=(0.01, 1000.0),
                                help="the PA-10 stops for good once the RVC error is under "
                                     "this (s_u* reached, Sec. 7.1)")  # ours: the paper runs "until the robotic manipulator achieves the corresponding desired features"; 1 px is 4x the detection error
-    omega_max: float = param(60.0, unit="rad/s", range=(1.0, 300.0),
-                             help="fastest mode of the mini-robot loop (gain rule, ours)")  # ours: K_P, K_v "estimated by the user" (Sec. 3); 60 rad/s keeps omega dt = 0.06 at 1 kHz
+    omega_max: float = param(0.0, unit="rad/s", range=(0.0, 300.0),
+                             help="fastest mode of the mini-robot loop; 0: the rule (the "
+                                  "smaller of the 200 Hz feedback's 2 pi f / 20 and the "
+                                  "fastest mode whose first torque is within the limits)")  # ours: K_P, K_v "estimated by the user" (Sec. 3); the rule is in controller.Pomares2011Controller._gains (issue 17 item 11; was a fixed 60 rad/s)
     zeta: float = param(1.0, range=(0.1, 5.0), help="damping ratio of every mode (ours)")  # ours: critical damping, no overshoot of the image features
     mini_controller: str = param("direct", choices=("direct", "indirect"),
                                  help="direct: torque-level hybrid VS (eq. 5); indirect: "

@@ -15,10 +15,13 @@ from experiments.pomares2011.human_tracking import (
     human_distance,
 )
 from repro.control.hybrid_vs import (
+    SAMPLES_PER_MODE,
     HybridVSConfig,
     HybridVSController,
     gains_from_inertia,
     lyapunov,
+    sampled_loop_omega,
+    torque_bounded_omega,
 )
 from repro.control.indirect_vs import (
     IndirectVSConfig,
@@ -31,6 +34,7 @@ from repro.sim.episode import Observation, StepResult
 from repro.sim.human import add_tracking_noise
 from repro.sim.pa10 import ALL_JOINTS, HAND_JOINTS
 from repro.sim.robot import JointGroup, Robot
+from repro.sim.world import pose_to_pb
 from repro.vision.features import interaction_matrix_points
 from repro.vision.pose import pose_from_points
 from repro.vision.vvs import vvs_pose
@@ -88,22 +92,53 @@ class Pomares2011Controller:
             self._L_memo = (key, pixel_interaction_matrix(uv, P_c[:, 2]))  # VVS depths
         return self._L_memo[1]
 
-    def _gains(self, q: np.ndarray, L_px: np.ndarray) -> None:
-        """The mini-robot's gains from its inertia at the first step (our rule)."""
+    def _gains(self, q: np.ndarray, uv: np.ndarray, L_px: np.ndarray) -> tuple[str, str]:
+        """The mini-robot's gains from its inertia at the first step (our rule); returns the
+        ``gain_rule`` event that states them.
+
+        ours (issue 17 item 11): the fastest closed-loop mode, unless ``omega_max`` fixes it,
+        is the smaller of (a) the bandwidth the loop's feedback rate allows: the torques are
+        computed at 1 kHz but the image error they act on is sampled by the 200 fps camera
+        and held, so the visual loop is a 200 Hz loop: 2 pi 200 / 20 = 62.8 rad/s
+        (SAMPLES_PER_MODE); (b) the fastest mode whose first torque command, at rest with
+        the start's image error, stays inside the mini-robot's torque limits (the design
+        stays linear). The sweep varies omega_max around it."""
         cfg = self.config
         J_g = self.chain.frame_jacobian("mini_camera_optical", q)[:, self.mini.idx]
         M = self.chain.mass_matrix(q)[np.ix_(self.mini.idx, self.mini.idx)]
-        g = gains_from_inertia(M, L_px @ J_g, cfg.omega_max, cfg.zeta)
+        G = self.mini.gravity_torques()
+        rows = (sc.PRIMARY_TASK_ROW,)
+        f_feedback = cfg.physics_rate / cfg.camera_period
+        w_s = sampled_loop_omega(f_feedback)
+        g1 = gains_from_inertia(M, L_px @ J_g, 1.0, cfg.zeta)
+        unit = HybridVSController(HybridVSConfig(self.s_star.ravel(), g1.k_P, g1.K_v, 1.0,
+                                                 cfg.dmin, avoid_rows=rows))
+        tau1, _ = unit.step(q[self.mini.idx], np.zeros(len(self.mini.idx)), uv.ravel(), L_px,
+                            J_g, np.zeros(len(self.mini.idx)), M)
+        w_t = torque_bounded_omega(tau1, G, np.asarray(self.mini.limits.tau_max))
+        omega = cfg.omega_max if cfg.omega_max > 0 else min(w_s, w_t)
+        g = gains_from_inertia(M, L_px @ J_g, omega, cfg.zeta)
         alpha = cfg.push_force * cfg.dmin / g.k_P
         K_v_active = 2.0 * cfg.zeta * cfg.avoid_omega * 0.5 * (M + M.T)
         self.hybrid = HybridVSController(HybridVSConfig(self.s_star.ravel(), g.k_P, g.K_v, alpha,
-                                                        cfg.dmin, K_v_active=K_v_active))
+                                                        cfg.dmin, avoid_rows=rows,
+                                                        K_v_active=K_v_active))
         if cfg.mini_controller == "indirect":
-            pd = pd_gains_from_inertia(M, cfg.omega_max, cfg.zeta)
+            pd = pd_gains_from_inertia(M, omega, cfg.zeta)
             self.indirect = IndirectVSController(IndirectVSConfig(
                 self.s_star.ravel(), cfg.indirect_gain, pd.K_p, pd.K_d,
                 np.asarray(self.mini.limits.qd_max), 1.0 / cfg.physics_rate,
                 np.asarray(self.mini.limits.q_min), np.asarray(self.mini.limits.q_max)))
+        tau0 = omega**2 * tau1 + G
+        how = ("fixed by omega_max" if cfg.omega_max > 0 else
+               f"min(feedback-rate bound 2 pi {f_feedback:g} Hz / {SAMPLES_PER_MODE:g} = "
+               f"{w_s:.1f}, torque bound {w_t:.1f}) rad/s")
+        return ("gain_rule", f"mini-robot gains at t = 0 (gains_from_inertia): omega_max = "
+                f"{omega:.2f} rad/s ({how}), zeta = {cfg.zeta}; k_P = {g.k_P:.6g} "
+                f"N m/px^2, K_v = {np.round(g.K_v, 9).tolist()} N m s/rad, alpha = {alpha:.6g};"
+                f" first torque {np.round(tau0, 4).tolist()} N m of limits "
+                f"{list(self.mini.limits.tau_max)}; M = the mini-robot block of the chain's "
+                "joint-space inertia (pinocchio CRBA of the run's URDF) at the start")
 
     def _rvc(self, q: np.ndarray, uv: np.ndarray, t: float,
              events: list[tuple[str, str]]) -> None:
@@ -137,7 +172,13 @@ class Pomares2011Controller:
             "vvs_iter": res.iterations, "vvs_residual_px": res.residual_px,
             "vvs_converged": res.converged,
             "vvs_pos_err_m": float(np.linalg.norm(res.T_cam_obj[:3, 3] - T_true[:3, 3])),
+            "vvs_rot_err_deg": float(np.degrees(np.arccos(np.clip(
+                0.5 * (np.trace(res.T_cam_obj[:3, :3].T @ T_true[:3, :3]) - 1.0), -1.0, 1.0)))),
             "e_u_px": e_u, "arm_reached": self.arm_reached}
+        for pre, T in (("vvs_", res.T_cam_obj), ("vvs_true_", T_true)):  # issue 17 item 12
+            pos, quat = pose_to_pb(T)
+            for a, v in zip(("x", "y", "z", "qx", "qy", "qz", "qw"), (*pos, *quat), strict=True):
+                cols[f"{pre}{a}"] = float(v)
         for i in range(N):
             cols[f"su{i + 1}_u"], cols[f"su{i + 1}_v"] = feats.uv[i]
             cols[f"su{i + 1}_u_true"], cols[f"su{i + 1}_v_true"] = true_u[i]
@@ -201,7 +242,7 @@ class Pomares2011Controller:
                               {}, [("no_pose", "PnP found no object pose: waiting")], fallback=True)
         L_px = self._interaction(f.uv, self.T_mc_obj)
         if self.hybrid is None:
-            self._gains(q, L_px)
+            events.append(self._gains(q, f.uv, L_px))
         assert self.hybrid is not None
         J_g = self.chain.frame_jacobian("mini_camera_optical", q)[:, self.mini.idx]
         M = self.chain.mass_matrix(q)[np.ix_(self.mini.idx, self.mini.idx)]
@@ -223,11 +264,11 @@ class Pomares2011Controller:
                            f"dist = {hd.dist:.3f} m {'<' if active else '>='} dmin = "
                            f"{self.config.dmin} m ({hd.pair})"))
         self.was_active = active
-        e_y = float(f.uv[0, 1] - self.s_star[0, 1])
+        e_y = float(f.uv.ravel()[sc.PRIMARY_TASK_ROW] - sc.PRIMARY_TASK_TARGET_PX)
         flange = self.chain.frame_pose("pa10_flange", q)[:3, 3]
         cols: dict[str, float | int | str | bool] = dict(self.rvc_cols)
         cols.update(V=diag["V"], e_s_px=float(np.sqrt(np.mean(np.sum(
-            (f.uv - self.s_star) ** 2, axis=1)))), e_f1y_px=e_y, e2=diag["e2"],
+            (f.uv - self.s_star) ** 2, axis=1)))), e_f2y_px=e_y, e2=diag["e2"],
             secondary_active=active, flange_x=flange[0], flange_y=flange[1],
             flange_z=flange[2], **cols_h)
         return StepResult({"arm": self.qd_arm, "mini": tau, "fingers": self.hand_hold.copy()},

@@ -50,6 +50,12 @@ from typing import Any, NamedTuple
 import numpy as np
 import pybullet as p
 
+from experiments.pomares2011.object_rest import (
+    SETTLE_S,
+    cylinder_dynamics,
+    settle_before_start,
+    support_distance,
+)
 from repro.config import param, validate
 from repro.control.tactile_control import (
     LOG_FIELDS,
@@ -377,6 +383,29 @@ class GraspAudit:
         self._apart = [0] * N_FINGERS  # control steps without contact, per finger
         self.lost_after = lost_after
 
+    def describe(self) -> dict[str, Any]:
+        """The link sets behind the audit's columns (issue 17 item 12), for scene.json."""
+        c, body = self.hand.client, self.hand.body
+
+        def name(idx: int) -> str:
+            if idx == -1:
+                return p.getBodyInfo(body, physicsClientId=c)[0].decode()
+            return p.getJointInfo(body, idx, physicsClientId=c)[12].decode()
+
+        fingers: dict[str, list[str]] = {}
+        for idx, owner in sorted(self.link_owner.items()):
+            fingers.setdefault(owner, []).append(name(idx))
+        links = getattr(self.dist_of, "links", None)
+        return {"contact_links": {**fingers, "meaning": "F_raw<k> / contact<k>: the contacts "
+                                  "of these links of finger k; F_raw_palm: the palm's; "
+                                  "F_raw_other: any other link of the body"},
+                "hand_dist_links": ("every link of the body" if links is None
+                                    else [name(i) for i in links]),
+                "hand_dist_meaning": "hand_dist_<body>: minimum PyBullet closest-points "
+                                     "distance over these links",
+                "support_dist": "signed closest-points distance cylinder - support bodies "
+                                f"{list(self.supports)}"}
+
     def read(self, t: float, q: Mapping[str, np.ndarray]) -> AuditReading:
         c = self.hand.client
         pos, quat = p.getBasePositionAndOrientation(self.cyl, physicsClientId=c)
@@ -415,6 +444,7 @@ class GraspAudit:
         cols["contact_palm"] = force["palm"] > 0.0
         cols["contact_other"] = force["other"] > 0.0
         cols["contact_support"] = on_support
+        cols["support_dist"] = support_distance(c, self.cyl, self.support_ids)
         cols["F_raw_palm"] = force["palm"]
         cols["F_raw_other"] = force["other"]
         cols["F_raw_total"] = float(sum(force.values()))
@@ -564,6 +594,9 @@ def declare_columns(hand_joints: bool = True, supports: tuple[str, ...] = ("supp
              "cylinder", audit=True)
     cols.add("contact_support", "bool", audit + "the support rail touches the cylinder",
              audit=True)
+    cols.add("support_dist", "m", audit + "signed distance cylinder - support rail (PyBullet "
+             "closest points; < 0: the soft contact's deflection under the weight; capped at "
+             "0.05 m)", audit=True)
     cols.add("F_raw_palm", "N", audit + "normal force palm - cylinder", audit=True)
     cols.add("F_raw_other", "N", audit + "normal force other hand links - cylinder", audit=True)
     cols.add("F_raw_total", "N", audit + "sum of every normal force between the hand and the "
@@ -850,16 +883,11 @@ def build(config: Exp3Config, out_dir: Path) -> tuple[Episode, Exp3Controller]:
         p.changeDynamics(hand.body, link, lateralFriction=1.0, rollingFriction=0.0,
                          spinningFriction=0.0, physicsClientId=c)
     T_world_cyl = T_WORLD_HAND @ make_T(rot_y(math.pi / 2), (0.0, 0.0, zc))
-    scene.add_dynamic("cylinder", Part("cylinder", (config.cylinder_radius,
-                                                    config.cylinder_length)),
-                      config.cylinder_mass, T_world_cyl, CYLINDER_RGBA, {
-                          "lateralFriction": config.friction,
-                          "rollingFriction": config.rolling_friction,
-                          "spinningFriction": config.spinning_friction,
-                          "contactStiffness": config.contact_stiffness,
-                          "contactDamping": config.contact_damping, "restitution": 0.0})
     T_support = make_T(None, (T_world_cyl[0, 3], T_world_cyl[1, 3],
                               T_world_cyl[2, 3] - config.cylinder_radius - SUPPORT_SIZE[2] / 2))
+    scene.add_dynamic("cylinder", Part("cylinder", (config.cylinder_radius,
+                                                    config.cylinder_length)),
+                      config.cylinder_mass, T_world_cyl, CYLINDER_RGBA, cylinder_dynamics(config))
     support = scene.add_box("support", SUPPORT_SIZE, T_support, SUPPORT_RGBA, moving=True)
     p.changeDynamics(support.ids[0], -1, lateralFriction=1.0, physicsClientId=c)
     motors = FingerMotors(hand)
@@ -875,7 +903,7 @@ def build(config: Exp3Config, out_dir: Path) -> tuple[Episode, Exp3Controller]:
                                        "tau_prox{i}, tau_dist{i}, tau{i}", "source":
                                        "PyBullet appliedJointMotorTorque of the last step"})
     scene.add_sensor("grasp_audit", {"kind": "ground_truth", "frame": "bh8_palm link frame",
-                                     "drop_m": DROP_M})
+                                     "drop_m": DROP_M, **audit.describe()})
 
     def support_pose(t: float) -> np.ndarray:
         T = T_support.copy()
@@ -897,7 +925,11 @@ def build(config: Exp3Config, out_dir: Path) -> tuple[Episode, Exp3Controller]:
                      "the hand links and the support carry 1.0, so every pair's coefficient is "
                      "the cylinder's; rolling / spinning friction of the hand and support 0",
                      "dynamic": "a free body: its pose columns cylinder_* are read from "
-                     "PyBullet every step"},
+                     "PyBullet every step",
+                     "start": f"at rest on the support: released touching it at "
+                     f"released_at, left to settle for {SETTLE_S} s before t = 0 with the hand "
+                     "held still (object_rest.settle_before_start)",
+                     "released_at": pose_json(T_world_cyl)},
         "support": {"size_m": list(SUPPORT_SIZE), "lowered_by_m": config.support_drop_m,
                     "speed_m_s": config.support_speed_m_s, "starts": "support_delay_s after "
                     "every finger stopped closing (pose columns support_*)"},
@@ -910,6 +942,9 @@ def build(config: Exp3Config, out_dir: Path) -> tuple[Episode, Exp3Controller]:
         "pressure_images": PRESSURE_IMAGES,
         "frames": "frames/scene_<control step>.png every snapshot_period (Fig. 11)",
     }
+    # issue 17 item 9: the run starts with the cylinder at rest on its rail
+    settle_before_start(scene)
+    scene.extra["exp3"]["cylinder"]["start_pose"] = pose_json(scene["cylinder"].T_world)
     # ours: looking along the cylinder's axis, finger 3 on the left, fingers 1-2 on the right
     view = View(target=(0.0, 0.0, 0.30), distance=0.36, yaw=90.0, pitch=-10.0, width=320,
                 height=240, fov=36.0)

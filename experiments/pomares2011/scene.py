@@ -96,6 +96,18 @@ T_FLANGE_RVC = trans(0.0, 0.0, PALM_HEIGHT)
 # --------------------------------------------------------------- desired features (Sec. 7.1)
 #: s* of the mini-robot camera, f1..f4 [px] (pomares2011 Sec. 7.1); dot i images at row i.
 S_STAR = np.array([(324.0, 207.0), (377.0, 272.0), (307.0, 322.0), (257.0, 259.0)])
+#: Experiment 2's one-DoF primary task while the human is within dmin (Sec. 7.2): "the goal
+#: of the mini-robot is to observe the y-coordinate of f_1p at position 272, i.e. f*_1py =
+#: 272 px"; "this DOF compensates the motion of the robotic manipulator" and the secondary
+#: task "causes a small variation in the image features". s*'s f1y is 207 px and its f2y
+#: 272 px. ours (issue 17 item 12): we hold f2y at 272 px, the feature whose s* coordinate
+#: the text names: holding a coordinate where s* already has it is the pure compensation
+#: the text describes, while moving f1 from 207 to 272 px would be a 65 px image motion of
+#: its own, no "small variation". The literal reading (f1y to 272 px) is not implemented.
+#: Row of s (x1, y1, x2, y2, ...) and its target [px].
+PRIMARY_TASK_ROW = 3
+PRIMARY_TASK_TARGET_PX = 272.0
+assert S_STAR.ravel()[PRIMARY_TASK_ROW] == PRIMARY_TASK_TARGET_PX
 #: s_u* of the RVC at the PA-10 goal [px] (pomares2011 Sec. 7.1); P_u row i images at row i.
 S_U_STAR = np.array([(254.0, 79.0), (293.0, 226.0), (131.0, 274.0), (93.0, 116.0)])
 S_STAR.setflags(write=False)

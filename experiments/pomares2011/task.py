@@ -47,6 +47,7 @@ from experiments.pomares2011 import scene as sc
 from experiments.pomares2011.columns import declare_columns as approach_columns
 from experiments.pomares2011.config import Pomares2011Config
 from experiments.pomares2011.controller import HAND_IDX, Pomares2011Controller
+from experiments.pomares2011.object_rest import SETTLE_S, cylinder_dynamics, settle_before_start
 from experiments.pomares2011.run import build_parts
 from repro.config import param, validate
 from repro.errors import ConfigError
@@ -224,16 +225,13 @@ def build(config: TaskConfig, out_dir: Path) -> tuple[Episode, TaskController]:
                                         e3.planned_dy(config))
     preshape = plan[0] - B.J2_RATIO * math.radians(config.preshape_clearance_deg)
     T_support = support_pose(config)
+    T_cyl = cylinder_pose(config)
 
     def add_object(scene: Scene) -> None:
         scene.add_dynamic("cylinder", Part("cylinder", (config.cylinder_radius,
                                                         config.cylinder_length)),
-                          config.cylinder_mass, cylinder_pose(config), TASK_CYLINDER_RGBA, {
-                              "lateralFriction": config.friction,
-                              "rollingFriction": config.rolling_friction,
-                              "spinningFriction": config.spinning_friction,
-                              "contactStiffness": config.contact_stiffness,
-                              "contactDamping": config.contact_damping, "restitution": 0.0})
+                          config.cylinder_mass, T_cyl, TASK_CYLINDER_RGBA,
+                          cylinder_dynamics(config))
         scene.add_box("support", support_size(config), T_support, e3.SUPPORT_RGBA,
                       moving=True)
 
@@ -267,13 +265,16 @@ def build(config: TaskConfig, out_dir: Path) -> tuple[Episode, TaskController]:
                                        "tau_prox{i}, tau_dist{i}, tau{i}", "source":
                                        "PyBullet appliedJointMotorTorque of the last step"})
     scene.add_sensor("grasp_audit", {"kind": "ground_truth", "frame": "bh8_palm link frame",
-                                     "drop_m": e3.DROP_M, "hand_dist": "over the hand's links "
-                                     "(base, palm, knuckles, phalanges)"})
+                                     "drop_m": e3.DROP_M, **audit.describe()})
     movers = dict(parts.movers)
     movers["support"] = _lowered(T_support, hand_ctrl)
     scene.extra["task"] = {
         "phases": TASK_PHASES,
-        "cylinder": {"pose": pose_json(cylinder_pose(config)), "radius_m": config.cylinder_radius,
+        "cylinder": {"released_at": pose_json(T_cyl),
+                     "start": f"at rest on the support: released touching it at released_at, "
+                     f"left to settle for {SETTLE_S} s before t = 0 with the robots held still "
+                     "(object_rest.settle_before_start); start_pose: where it came to rest",
+                     "radius_m": config.cylinder_radius,
                      "length_m": config.cylinder_length, "mass_kg": config.cylinder_mass,
                      "placement": "in the hand frame at the task's goal (layout.goal_flange): "
                      "axis along the hand's x, centre on the hand axis palm_gap under the palm",
@@ -298,6 +299,9 @@ def build(config: TaskConfig, out_dir: Path) -> tuple[Episode, TaskController]:
     tactile.declare(cols)
     cols.add("task_phase", "text", "Table 1 phase: " + "; ".join(
         f"{k}: {v}" for k, v in TASK_PHASES.items()))
+    # issue 17 item 9: the run starts with the cylinder at rest on its rail
+    settle_before_start(scene)
+    scene.extra["task"]["cylinder"]["start_pose"] = pose_json(scene["cylinder"].T_world)
     ep = Episode(scene, parts.drives, ctrl, cols, config.duration, cameras=[parts.rig],
                  sensors=[tactile, e3.FingerTorqueSensor(chain), audit], movers=movers,
                  video=config.video, video_every=33, view=TASK_VIEW,

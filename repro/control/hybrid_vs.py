@@ -39,7 +39,9 @@ Readings we had to make (each marked ``# ours:`` at the code):
   ``I - W^+ W`` left to the secondary task. Four points (k = 8) and a 6-DoF camera give
   rank 6: ``W^+ W = I_6`` and ``e2`` has no effect (experiment 1, the CRS-A465 with 4 points
   included). For ``e2`` to act, the primary task must keep fewer rows: experiment 2 keeps
-  only ``f1y`` (row 1), rank 1, a 5-dimensional null space for ``e2``.
+  one image coordinate (pomares2011 Sec. 7.2's "f*_1py = 272 px"; the suite holds f2y,
+  row 3, see experiments/pomares2011/scene.py), rank 1, a 5-dimensional null space for
+  ``e2``.
 * When the reduced primary task applies: whenever the secondary task is active
   (``dist < d_min``); otherwise all rows (the paper: after the human leaves, "only the
   primary task is employed"). ``e_s`` in ``V`` (10) is the error of the rows in use.
@@ -106,7 +108,7 @@ def weight_matrix(L_s: np.ndarray, rows: Sequence[int] | None = None,
     Args:
         L_s: (k, 6) interaction matrix, rows ``x1, y1, x2, ...`` (any consistent units).
         rows: indices of the rows of ``L_s`` the primary task keeps (None: all), e.g.
-            ``(1,)`` for ``f1y`` alone (pomares2011 experiment 2).
+            ``(1,)`` for ``y1`` alone.
         rank_tol: singular values below ``rank_tol * sigma_max`` count as zero.
 
     Returns:
@@ -273,6 +275,40 @@ def gains_from_inertia(M: np.ndarray, J: np.ndarray, omega_max: float, zeta: flo
     return Gains(float(k_P), 0.5 * (K_v + K_v.T))
 
 
+#: Sample rate over closed-loop bandwidth of a digital loop that should behave like its
+#: continuous design (Franklin, Powell & Workman, Digital Control of Dynamic Systems, 3rd ed.,
+#: Sec. 11.3: 20-40x for a smooth response; we take the least, 20).
+SAMPLES_PER_MODE = 20.0
+
+
+def sampled_loop_omega(sample_rate_hz: float, ratio: float = SAMPLES_PER_MODE) -> float:
+    """The fastest mode [rad/s] a loop fed at ``sample_rate_hz`` should be given:
+    ``2 pi f / ratio``."""
+    if not (sample_rate_hz > 0 and ratio > 0):
+        raise ConfigError(f"need sample_rate_hz > 0 and ratio > 0, got {sample_rate_hz}, {ratio}")
+    return 2.0 * np.pi * sample_rate_hz / ratio
+
+
+def torque_bounded_omega(tau_unit: np.ndarray, G: np.ndarray, tau_max: np.ndarray) -> float:
+    """The largest ``omega`` [rad/s] with ``|omega^2 tau_unit + G| <= tau_max`` in every joint:
+    the fastest mode whose first command, at rest, stays inside the drive's torque limits.
+    ``tau_unit``: the task torque of (5) at rest with the gains of ``omega = 1 rad/s``
+    (:func:`gains_from_inertia`; it scales with ``omega^2``) [N m]; ``G`` the gravity
+    torques [N m]. inf when no joint is loaded by the task.
+
+    Raises:
+        ConfigError: gravity alone exceeds a limit.
+    """
+    a, g, lim = (np.asarray(x, dtype=float) for x in (tau_unit, G, tau_max))
+    if np.any(np.abs(g) > lim):
+        raise ConfigError(f"gravity torques {g.tolist()} exceed the limits {lim.tolist()}")
+    w2 = np.inf
+    for ai, gi, li in zip(a, g, lim, strict=True):
+        if ai != 0.0:
+            w2 = min(w2, (li - np.sign(ai) * gi) / abs(ai))
+    return float(np.sqrt(w2))
+
+
 # ----------------------------------------------------------------------------- Sec. 4
 def distance_gradient(p_c: np.ndarray, n_c: np.ndarray) -> np.ndarray:
     """``d(dist)/dr`` (6,): rate of the human-robot distance per camera twist.
@@ -370,8 +406,8 @@ class HybridVSConfig:
             pushes the closest point away with a virtual force ``F`` [N] at contact.
         dmin: threshold of (17) [m], > 0; ours.
         avoid_rows: rows of ``s`` the primary task keeps while the secondary task is active
-            (experiment 2: ``(1,)``, ``f1y`` alone); None: all rows (then ``W^+W = I`` and
-            ``e2`` cannot act).
+            (default ``(1,)``, ``y1`` alone; pomares2011 experiment 2 passes its own); None:
+            all rows (then ``W^+W = I`` and ``e2`` cannot act).
         K_v_active: (n, n) derivative gain used instead of ``K_v`` while the secondary task
             is active [N m s/rad]; None: ``K_v``. ours: ``K_v`` of
             :func:`gains_from_inertia` damps each visual mode in proportion to its

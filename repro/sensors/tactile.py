@@ -256,12 +256,16 @@ class TactilePad:
 BH8_PALM = PadLayout(rows=6, cols=4, cell=(0.010, 0.010))
 #: Outer (distal) phalanx pad: 7 rows along the link x 3 across of 6 x 6 mm, plus one tip
 #: cell = 22 tactels of 36 mm^2 (pomares2011 Sec. 7.3; GraspIt layout, facts sheet: the tip
-#: cell continues the middle column towards the tip). The 48 x 18 mm footprint is centred
-#: on the pad frame: grid centre at x = -3 mm, tip cell at x = +21 mm (# ours: the pad
-#: frame is "the centre of the grasping face"; GraspIt puts the cells 0-48 mm back from
-#: the link-3 frame).
-BH8_DISTAL = PadLayout(rows=7, cols=3, cell=(0.006, 0.006), origin=(-0.003, 0.0),
-                       extra_cells=((0.021, 0.0, 0.006, 0.006),))
+#: cell continues the middle column towards the tip). Where it sits: GraspIt's cells span
+#: -48..0 mm from its link-3 frame, which its DH (a = 55 mm) puts at the distal link's end,
+#: so the real pad ends where the finger ends, the tip cell on the fingertip. Ours ends at
+#: our finger's end, A3 + tip radius = 56.5 mm from the distal axis, i.e. +31.5 mm from the
+#: pad frame (the distal box's face centre, 25 mm from the axis): grid centre at x = +4.5 mm,
+#: tip cell at +28.5 mm (issue 17 item 8: centred on the pad frame, the grid ended 7.5 mm
+#: short of the finger's end, and finger 3's contact at 24-26 mm lay past it;
+#: tests/test_tactile.py checks the end against repro.sim.barrett's geometry).
+BH8_DISTAL = PadLayout(rows=7, cols=3, cell=(0.006, 0.006), origin=(0.0045, 0.0),
+                       extra_cells=((0.0285, 0.0, 0.006, 0.006),))
 #: Inner (proximal) phalanx pad: 24 tactels of 25 mm^2 (pomares2011 Sec. 7.3) as 8 rows x 3
 #: of 5 x 5 mm (# ours: no public layout; 40 x 15 mm fits the proximal link's face).
 BH8_PROXIMAL = PadLayout(rows=8, cols=3, cell=(0.005, 0.005))
@@ -603,6 +607,8 @@ class PadReading:
         n_contacts: raw contact points on the sensing face.
         saturated: (n,) True where pressure_true > 140 kPa.
         invalid: True when PyBullet gave non-finite contact data (those points dropped).
+        force_link: sum of the normal forces of every (finite) contact point on the pad's
+            link, on the face or not [N] (audit: what the link really feels).
     """
 
     pressure: np.ndarray
@@ -613,11 +619,20 @@ class PadReading:
     n_contacts: int
     saturated: np.ndarray
     invalid: bool
+    force_link: float = math.nan
 
     @property
     def p_max(self) -> float:
         """Maximum reported pressure [kPa] (what pomares2011 Algorithm 1 compares)."""
         return float(self.pressure.max())
+
+    @property
+    def coverage(self) -> float:
+        """force_map / force_link: the share of the link's contact force the reported map
+        carries; NaN while the link feels under :data:`COVERAGE_MIN_FORCE_N`."""
+        if not self.force_link >= COVERAGE_MIN_FORCE_N:
+            return math.nan
+        return self.force_map / self.force_link
 
 
 @dataclass(frozen=True)
@@ -638,6 +653,15 @@ class TactileReading:
     failed: tuple[str, ...] = field(default_factory=tuple)
 
 
+#: Below this contact force on a pad's link its coverage is not judged [N]. # ours: 10
+#: quantisation steps of one distal tactel (10 x 0.7 kPa x 36 mm^2 = 0.25 N): under it
+#: the quantised map cannot resolve a 10 % shortfall.
+COVERAGE_MIN_FORCE_N = 10 * 0.7e3 * 36e-6
+#: A pad whose coverage falls under this raises ``tactile_coverage_low``. # ours: issue 17
+#: item 8 (the map should carry >= 90 % of what the link feels; fingers 1-2 carry 97-99 %).
+COVERAGE_MIN = 0.9
+
+
 def read_pad(client: int, mp: MountedPad) -> PadReading:
     """Sample one pad now (no hold): contacts -> patches -> pressure map."""
     lay = mp.pad.layout
@@ -651,7 +675,8 @@ def read_pad(client: int, mp: MountedPad) -> PadReading:
                       force_contacts=float(con.force[sel].sum()),
                       force_pad=float(p_true @ areas * 1e3),
                       force_map=float(p_rep @ areas * 1e3), n_contacts=int(sel.size),
-                      saturated=p_true > PRESSURE_MAX_KPA, invalid=bool(np.any(~con.finite)))
+                      saturated=p_true > PRESSURE_MAX_KPA, invalid=bool(np.any(~con.finite)),
+                      force_link=float(con.force[con.finite].sum()))
 
 
 def pressure_image(layout: PadLayout, pressure: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -733,6 +758,7 @@ class TactileSensor:
         self.max_consecutive_faults = int(max_consecutive_faults)
         self._fault_run = dict.fromkeys(names, 0)
         self._last: TactileReading | None = None
+        self._low: set[str] = set()  # pads whose coverage is under COVERAGE_MIN
         self._t0 = 0.0
         self._k = 0  # samples taken; the next one is due at t0 + k * period
 
@@ -764,6 +790,8 @@ class TactileSensor:
             out[f"{self.prefix}{name}_pmax"] = pr.p_max
             out[f"{self.prefix}{name}_F"] = pr.force_contacts
             out[f"{self.prefix}{name}_Fmap"] = pr.force_map
+            out[f"{self.prefix}{name}_Flink"] = pr.force_link
+            out[f"{self.prefix}{name}_coverage"] = pr.coverage
         if self.tactel_columns:
             out.update(tactel_row(reading, self.prefix))
         return out
@@ -784,6 +812,24 @@ class TactileSensor:
             if pr.invalid:
                 out.append(("sensor_nan", f"{self.name} pad {name}: non-finite contact data "
                             "from PyBullet, those contact points dropped"))
+            cov = pr.coverage
+            if math.isnan(cov):  # too little force on the link to judge
+                if name in self._low:
+                    self._low.discard(name)
+                    out.append(("tactile_coverage_low_end", f"{self.name} pad {name}: contact "
+                                f"force {pr.force_link:.2f} N, under the "
+                                f"{COVERAGE_MIN_FORCE_N:.2f} N coverage is judged at"))
+            elif cov < COVERAGE_MIN:
+                if name not in self._low:
+                    self._low.add(name)
+                    out.append(("tactile_coverage_low",
+                                f"audit: {self.name} pad {name} reports {pr.force_map:.2f} N "
+                                f"of the {pr.force_link:.2f} N its link feels (coverage "
+                                f"{cov:.2f} < {COVERAGE_MIN}): contact off the sensing cells"))
+            elif name in self._low:
+                self._low.discard(name)
+                out.append(("tactile_coverage_low_end", f"{self.name} pad {name} coverage "
+                            f"{cov:.2f} >= {COVERAGE_MIN} again"))
         return out
 
     def failure(self, reading: TactileReading) -> str | None:
@@ -808,6 +854,13 @@ class TactileSensor:
                      "of the contact points on its sensing face", audit=True)
             cols.add(f"{p_}{n}_Fmap", "N", f"pad {n}: sum of reported pressure * tactel "
                      "area")
+            cols.add(f"{p_}{n}_Flink", "N", f"audit: pad {n}: sum of the PyBullet normal "
+                     "forces of every contact point on the pad's link (on its face or not)",
+                     audit=True)
+            cols.add(f"{p_}{n}_coverage", "-", f"audit: pad {n}: Fmap / Flink, the share of "
+                     "the link's contact force the reported map carries (NaN while Flink < "
+                     f"{COVERAGE_MIN_FORCE_N:.2f} N); under {COVERAGE_MIN}: event "
+                     "tactile_coverage_low", audit=True)
             if self.tactel_columns:
                 cols.add(f"{p_}{n}_{{i}}", "kPa", f"pad {n}: reported pressure of tactel "
                          "{i} (row-major, rows along the pad x; extra cells last)",

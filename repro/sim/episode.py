@@ -788,6 +788,14 @@ def _camera_json(cam: Camera) -> dict[str, Any]:
                         "inv(T_world_camera); projection: see repro.sensors.camera."
                         "Intrinsics.projection_matrix_gl('tiny')",
             "projection_matrix_gl": i.projection_matrix_gl("tiny"),
+            "visibility": ("the <prefix><i>_visible audit: a point is visible when it is in "
+                           "front of the true camera (Z > 0), projects inside the image, the "
+                           "camera is on its dot's front side (the target body's +z) and a ray "
+                           f"cast from the camera centre ({RAY_START} m out along the ray) "
+                           f"towards the point lifted {VISIBILITY_LIFT} m along that +z "
+                           "(pybullet.rayTestBatch in the physics client, every body with a "
+                           "collision shape, the robots' links included; the dots have none) "
+                           f"hits nothing before {VISIBILITY_MARGIN} m short of it"),
             "windows": None if cam.window is None else {
                 **dataclasses.asdict(cam.window),
                 "meaning": "after a full frame, only windows around the dots' last detections "
