@@ -372,7 +372,6 @@ def test_same_branch_rejects_elbow_wrist_and_shoulder_flips() -> None:
 
 def test_view_angle_column_is_the_angle_to_the_dot_normal(tmp_path: Path) -> None:
     """Item 5: p{i}_view_deg recomputed from the logged camera pose and the conrod's pose."""
-    from scipy.spatial.transform import Rotation
 
     exp = next(e for e in EXPERIMENTS.experiments if e.name == "experiment")
     run = load_run(exp.run(dataclasses.replace(short_config("experiment"), duration=0.3),

@@ -17,12 +17,12 @@ import pytest
 
 from experiments.thomas2024.scene import attachments
 from repro.control.proximity_features import (
-    L_delta_beta1,
-    L_delta_coarse,
-    L_delta_exact,
     SOURCE_FIT,
     SOURCE_HELD,
     SOURCE_NONE,
+    L_delta_beta1,
+    L_delta_coarse,
+    L_delta_exact,
     NormalEstimator,
     NormalEstimatorConfig,
     fit_plane_normal,
