@@ -550,12 +550,16 @@ def _cmd_figures(args: argparse.Namespace) -> int:
 
     claims = [c for paper in papers.values() if paper.claims is not None for c in paper.claims()]
     if claims:
-        from repro.runs.claims import evaluate_claims, write_claims_csv
+        from repro.runs.claims import evaluate_claims, write_claims_csv, write_clauses_csv
 
-        table = evaluate_claims(claims, results_dir)
+        clause_rows: list[dict[str, object]] = []
+        table = evaluate_claims(claims, results_dir, clauses_out=clause_rows)
         csv_path = results_dir / "claims.csv"
         results_dir.mkdir(parents=True, exist_ok=True)
         write_claims_csv(table, csv_path)
+        write_clauses_csv(clause_rows, sorted(p.key for p in papers.values()
+                                              if p.claims is not None),
+                          results_dir / "claim_clauses.csv")
         if hasattr(table, "to_string"):
             print(table.to_string(index=False))
         print(f"wrote {len(claims)} claims to {csv_path}")

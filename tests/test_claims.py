@@ -227,7 +227,7 @@ def test_claim_validation() -> None:
 
 def _table(paper: str, claims: list[str], status: str = "reproduced") -> pd.DataFrame:
     rows = [(paper, c, f"d{c}", "e", "m", status) for c in claims]
-    return pd.DataFrame(rows, columns=list(CLAIMS_COLUMNS))
+    return pd.DataFrame(rows, columns=list(CLAIMS_COLUMNS[:6]))
 
 
 def test_write_claims_csv_merges_and_sorts(tmp_path: Path) -> None:
@@ -287,3 +287,63 @@ def test_audit_note_names_wrong_and_hidden_features() -> None:
     note = audit_note({"a": run(clean), "experiment": run(bad)})
     assert "experiment" in note and "[2]" in note and "250 rows" in note and "322.0" in note
     assert "hidden" in note and "14 rows" in note
+
+
+# ------------------------------------------------------------ issue 18: clause by clause
+def test_clause_verdict_margin_and_marginal_flag() -> None:
+    from repro.runs.claims import Clause
+
+    c = Clause("error small", 1.8, "<=", 2.0, "mm", "paper: Sec. 1 'under 2 mm'")
+    assert c.holds and c.margin == pytest.approx(0.2) and c.marginal  # 10 % of 2 mm
+    far = Clause("error small", 1.0, "<=", 2.0, "mm", "ours: 4x the noise")
+    assert far.holds and not far.marginal and far.relative_margin == pytest.approx(0.5)
+    fail = Clause("fast", 5.0, ">=", 10.0, "Hz", "paper: Sec. V")
+    assert not fail.holds and fail.margin == pytest.approx(-5.0) and not fail.marginal
+    assert not Clause("nan", float("nan"), "<", 1.0, "-", "ours: x").holds
+    zero = Clause("no collision", 0.0, "<=", 0.0, "-", "paper: 'collision-free'")
+    assert zero.holds and not zero.marginal  # no relative margin against a zero bound
+    assert "holds" in c.summary() and "MARGINAL" in c.summary()
+    with pytest.raises(UnknownChoiceError):
+        Clause("x", 1.0, "=<", 2.0, "-", "ours: x")
+    with pytest.raises(ConfigError):
+        Clause("x", 1.0, "<=", 2.0, "-", "a number I like")
+
+
+def test_claim_status_from_its_clauses() -> None:
+    from repro.runs.claims import Clause
+
+    ok = Clause("a", 1.0, "<=", 2.0, "-", "ours: a")
+    bad = Clause("b", 3.0, "<=", 2.0, "-", "ours: b")
+    assert ClaimResult.from_clauses("m", [ok, ok]).status == "reproduced"
+    part = ClaimResult.from_clauses("m", [ok, bad])
+    assert part.status == "partly_reproduced" and part.measured == "m -- not met: b"
+    assert ClaimResult.from_clauses("m", [bad]).status == "not_reproduced"
+    with pytest.raises(ConfigError):
+        ClaimResult.from_clauses("m", [])
+
+
+def test_clauses_reach_the_claims_table_and_the_clause_table(results: Path,
+                                                             tmp_path: Path) -> None:
+    from repro.runs.claims import CLAUSE_COLUMNS, Clause, write_clauses_csv
+
+    def check(runs: dict[str, RunFiles]) -> ClaimResult:
+        worst = float(runs["good"].trace["err_m"].max()) * 1e3
+        return ClaimResult.from_clauses(f"max error {worst:.1f} mm", [
+            Clause("error under 5 mm", worst, "<", 5.0, "mm", "paper: 'under 5 mm'"),
+            Clause("error under 1 mm", worst, "<", 1.0, "mm", "ours: stricter")])
+
+    claim = Claim("p2020", "1", "claim 1", "< 5 mm", ("good",), check,
+                  quote="Sec. 2: 'the error stays under 5 mm'")
+    rows: list[dict[str, object]] = []
+    df = evaluate_claims([claim], results, _papers(), clauses_out=rows)
+    row = df.iloc[0]
+    assert row["status"] == "partly_reproduced" and "Sec. 2" in row["quote"]
+    assert "error under 5 mm: 4 mm < 5 mm (holds" in row["clauses"]
+    assert row["marginal"] == ""
+    assert [r["clause"] for r in rows] == ["error under 5 mm", "error under 1 mm"]
+    path = tmp_path / "claim_clauses.csv"
+    write_clauses_csv(rows, ["p2020"], path)
+    write_clauses_csv(rows, ["p2020"], path)  # replaces, does not append
+    got = pd.read_csv(path)
+    assert tuple(got.columns) == CLAUSE_COLUMNS and len(got) == 2
+    assert list(got["holds"]) == [True, False]

@@ -394,15 +394,20 @@ def test_figures_and_claims(monkeypatch, papers, tmp_path, capsys):
     seen: dict[str, Any] = {}
     fake_claims = types.ModuleType("repro.runs.claims")
 
-    def evaluate_claims(claims, results_dir):
+    def evaluate_claims(claims, results_dir, clauses_out=None):
         seen["evaluate"] = (list(claims), results_dir)
+        clauses_out.append({"paper": "fake"})
         return "TABLE"
 
     def write_claims_csv(df, path):
         seen["write"] = (df, path)
 
+    def write_clauses_csv(rows, papers, path):
+        seen["clauses"] = (rows, papers, path)
+
     fake_claims.evaluate_claims = evaluate_claims
     fake_claims.write_claims_csv = write_claims_csv
+    fake_claims.write_clauses_csv = write_clauses_csv
     monkeypatch.setitem(sys.modules, "repro.runs.claims", fake_claims)
 
     res, fig = tmp_path / "res", tmp_path / "fig"
@@ -413,6 +418,7 @@ def test_figures_and_claims(monkeypatch, papers, tmp_path, capsys):
     assert figure_calls == [(res, fig)]
     assert seen["evaluate"] == (["claim-a", "claim-b"], res)
     assert seen["write"] == ("TABLE", res / "claims.csv")
+    assert seen["clauses"] == ([{"paper": "fake"}], ["fake", "other"], res / "claim_clauses.csv")
     out = capsys.readouterr().out
     assert "fig3.png" in out and "other: no figures" in out
 

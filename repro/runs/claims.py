@@ -36,9 +36,12 @@ from repro.runs.validate import DamagedRun, check_run
 
 __all__ = [
     "CLAIMS_COLUMNS",
+    "CLAUSE_COLUMNS",
+    "MARGINAL_FRACTION",
     "STATUSES",
     "Claim",
     "ClaimResult",
+    "Clause",
     "RunExtent",
     "audit_note",
     "evaluate_claims",
@@ -50,8 +53,78 @@ __all__ = [
     "write_claims_csv",
 ]
 
-STATUSES = ("reproduced", "not_reproduced", "not_run")
-CLAIMS_COLUMNS = ("paper", "claim", "description", "expected", "measured", "status")
+STATUSES = ("reproduced", "partly_reproduced", "not_reproduced", "not_run")
+CLAIMS_COLUMNS = ("paper", "claim", "description", "expected", "measured", "status", "quote",
+                  "clauses", "marginal")
+#: The tidy clause table (results/claim_clauses.csv): one row per clause of every claim.
+CLAUSE_COLUMNS = ("paper", "claim", "clause", "measured", "op", "threshold", "unit", "source",
+                  "holds", "margin", "relative_margin", "marginal")
+#: A clause whose measured figure is within this fraction of its threshold is ``marginal``
+#: (issue 18: within 10 %).
+MARGINAL_FRACTION = 0.10
+_OPS = {"<=": lambda a, b: a <= b, ">=": lambda a, b: a >= b, "<": lambda a, b: a < b,
+        ">": lambda a, b: a > b}
+
+
+@dataclass(frozen=True)
+class Clause:
+    """One clause of a claim: one measured figure against one threshold.
+
+    Attributes:
+        name: what the clause says (the paper's words where they exist).
+        measured: the figure measured on the runs (NaN: could not be measured; fails).
+        op: how it must compare with ``threshold``: "<=", ">=", "<" or ">".
+        threshold: the bound.
+        unit: unit of ``measured`` and ``threshold`` ("-" for a count or a ratio).
+        source: where the threshold comes from: "paper: <quote or section>" or
+            "ours: <why>".
+    """
+
+    name: str
+    measured: float
+    op: str
+    threshold: float
+    unit: str
+    source: str
+
+    def __post_init__(self) -> None:
+        if self.op not in _OPS:
+            raise UnknownChoiceError("clause op", self.op, tuple(_OPS))
+        if not (self.source.startswith("paper:") or self.source.startswith("ours:")):
+            raise ConfigError(f"clause {self.name!r}: source must start with 'paper:' or "
+                              f"'ours:', got {self.source!r}")
+        object.__setattr__(self, "measured", float(self.measured))
+        object.__setattr__(self, "threshold", float(self.threshold))
+
+    @property
+    def holds(self) -> bool:
+        """True when ``measured op threshold`` (False for a NaN figure)."""
+        return bool(math.isfinite(self.measured) and _OPS[self.op](self.measured,
+                                                                  self.threshold))
+
+    @property
+    def margin(self) -> float:
+        """Signed distance to the threshold in ``unit``, positive on the holding side."""
+        d = self.measured - self.threshold
+        return d if self.op in (">=", ">") else -d
+
+    @property
+    def relative_margin(self) -> float:
+        """``margin / |threshold|`` (NaN for a zero threshold)."""
+        return self.margin / abs(self.threshold) if self.threshold != 0 else math.nan
+
+    @property
+    def marginal(self) -> bool:
+        """Within :data:`MARGINAL_FRACTION` of its threshold, on either side."""
+        r = self.relative_margin
+        return bool(math.isfinite(r) and abs(r) < MARGINAL_FRACTION)
+
+    def summary(self) -> str:
+        """One line: figure, bound, verdict, margin."""
+        u = "" if self.unit == "-" else f" {self.unit}"
+        flag = ", MARGINAL" if self.marginal else ""
+        return (f"{self.name}: {self.measured:.4g}{u} {self.op} {self.threshold:.4g}{u} "
+                f"({'holds' if self.holds else 'fails'}, margin {self.margin:+.3g}{u}{flag})")
 
 
 @dataclass(frozen=True)
@@ -61,16 +134,33 @@ class ClaimResult:
     Attributes:
         measured: what was measured, with units, e.g. "max error 1.8 mm".
         status: one of STATUSES.
+        clauses: the clauses the status was judged on (:meth:`from_clauses`); empty for a
+            check not yet written clause by clause.
     """
 
     measured: str
     status: str
+    clauses: tuple[Clause, ...] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.measured, str):
             raise ConfigError(f"measured must be a string, got {type(self.measured).__name__}")
         if self.status not in STATUSES:
             raise UnknownChoiceError("claim status", self.status, STATUSES)
+
+    @classmethod
+    def from_clauses(cls, measured: str, clauses: Sequence[Clause]) -> ClaimResult:
+        """The claim is ``reproduced`` when every clause holds, ``partly_reproduced`` when
+        some do (``measured`` names those that fail), ``not_reproduced`` when none does."""
+        clauses = tuple(clauses)
+        if not clauses:
+            raise ConfigError("a claim needs at least one clause")
+        held = [c for c in clauses if c.holds]
+        failed = [c.name for c in clauses if not c.holds]
+        status = ("reproduced" if not failed else
+                  "partly_reproduced" if held else "not_reproduced")
+        text = measured + (f" -- not met: {'; '.join(failed)}" if failed else "")
+        return cls(text, status, clauses)
 
 
 @dataclass(frozen=True)
@@ -88,6 +178,7 @@ class Claim:
         whole_run: the runs of ``runs`` the claim needs up to their configured duration (it
             speaks of the whole motion: "never", "the whole time"); if one of them ended
             early, the claim is not reproduced.
+        quote: the paper's words the check tests, with their section.
     """
 
     paper: str
@@ -97,6 +188,8 @@ class Claim:
     runs: tuple[str, ...]
     check: Callable[[dict[str, RunFiles]], ClaimResult]
     whole_run: tuple[str, ...] = ()
+    #: the paper's sentence(s) the check tests, with their section
+    quote: str = ""
 
     def __post_init__(self) -> None:
         for name in ("paper", "claim"):
@@ -207,7 +300,8 @@ def extent_note(runs: Mapping[str, RunFiles], whole_run: Sequence[str] = ()) -> 
     return (" [RUN LENGTH: " + "; ".join(notes) + "]") if notes else "", failed
 
 
-def _row(claim: Claim, measured: str, status: str) -> dict[str, str]:
+def _row(claim: Claim, measured: str, status: str,
+         clauses: Sequence[Clause] = ()) -> dict[str, str]:
     return {
         "paper": claim.paper,
         "claim": claim.claim,
@@ -215,7 +309,18 @@ def _row(claim: Claim, measured: str, status: str) -> dict[str, str]:
         "expected": claim.expected,
         "measured": measured,
         "status": status,
+        "quote": claim.quote,
+        "clauses": " | ".join(c.summary() for c in clauses),
+        "marginal": "; ".join(c.name for c in clauses if c.marginal),
     }
+
+
+def clause_rows(claim: Claim, clauses: Sequence[Clause]) -> list[dict[str, object]]:
+    """The claim's rows of the tidy clause table (:data:`CLAUSE_COLUMNS`)."""
+    return [{"paper": claim.paper, "claim": claim.claim, "clause": c.name,
+             "measured": c.measured, "op": c.op, "threshold": c.threshold, "unit": c.unit,
+             "source": c.source, "holds": c.holds, "margin": c.margin,
+             "relative_margin": c.relative_margin, "marginal": c.marginal} for c in clauses]
 
 
 def _default_hash(papers: Mapping[str, Paper], paper: str, name: str) -> str:
@@ -267,7 +372,8 @@ def _load_runs(
 
 
 def evaluate_claims(
-    claims: Sequence[Claim], results_dir: Path, papers: Mapping[str, Paper] | None = None
+    claims: Sequence[Claim], results_dir: Path, papers: Mapping[str, Paper] | None = None,
+    clauses_out: list[dict[str, object]] | None = None,
 ) -> pd.DataFrame:
     """Check every claim against the runs in results_dir/<paper>/<run>.
 
@@ -276,6 +382,8 @@ def evaluate_claims(
         results_dir: the results folder (``results/``).
         papers: the registered papers whose experiments' default configs the runs must have
             been made with (default: :func:`repro.runs.registry.load_papers`, read once).
+        clauses_out: receives the rows of the tidy clause table (:func:`clause_rows`) of
+            every claim that was judged clause by clause.
 
     Returns:
         One row per claim, columns CLAIMS_COLUMNS (all strings), in the order of ``claims``.
@@ -312,8 +420,12 @@ def evaluate_claims(
             rows.append(_row(claim, message, "not_run"))
             continue
         extent, cut_short = extent_note(runs, claim.whole_run)
-        status = "not_reproduced" if cut_short and result.status == "reproduced" else result.status
-        rows.append(_row(claim, result.measured + extent + audit_note(runs), status))
+        status = ("not_reproduced" if cut_short and result.status in (
+            "reproduced", "partly_reproduced") else result.status)
+        rows.append(_row(claim, result.measured + extent + audit_note(runs), status,
+                         result.clauses))
+        if clauses_out is not None:
+            clauses_out.extend(clause_rows(claim, result.clauses))
     return pd.DataFrame(rows, columns=list(CLAIMS_COLUMNS), dtype=object)
 
 
@@ -346,10 +458,15 @@ def natural_key(text: str) -> tuple[tuple[int, int | str], ...]:
 def validate_claims_table(df: pd.DataFrame) -> pd.DataFrame:
     """Return df as a claims table (columns CLAIMS_COLUMNS, str cells) or raise ReproError.
 
-    Checks: exactly the columns CLAIMS_COLUMNS (any order), no missing paper/claim/status,
+    Checks: exactly the columns CLAIMS_COLUMNS (any order; a table with only the first six,
+    written before clauses existed, gets empty quote/clauses/marginal), no missing
+    paper/claim/status,
     every status in STATUSES, no duplicate (paper, claim).
     """
     columns = set(df.columns)
+    if columns == set(CLAIMS_COLUMNS[:6]) and len(df.columns) == 6:  # a table of before issue 18
+        df = df.assign(**{c: "" for c in CLAIMS_COLUMNS[6:]})
+        columns = set(df.columns)
     if columns != set(CLAIMS_COLUMNS) or len(df.columns) != len(CLAIMS_COLUMNS):
         raise ReproError(
             f"claims table has columns {list(df.columns)}, expected {list(CLAIMS_COLUMNS)}"
@@ -382,6 +499,27 @@ def read_claims_csv(path: Path) -> pd.DataFrame:
         return validate_claims_table(df)
     except ReproError as exc:
         raise ReproError(f"{path}: {exc}") from exc
+
+
+def write_clauses_csv(rows: Sequence[Mapping[str, object]], papers: Sequence[str],
+                      path: Path) -> None:
+    """Merge clause rows (:data:`CLAUSE_COLUMNS`) into the tidy clause table at ``path``:
+    the rows of ``papers`` replace theirs, other papers' rows are kept; atomic."""
+    path = Path(path)
+    new = pd.DataFrame(list(rows), columns=list(CLAUSE_COLUMNS))
+    if path.is_file():
+        old = pd.read_csv(path, dtype=str, keep_default_na=False)
+        if tuple(old.columns) == CLAUSE_COLUMNS:
+            new = pd.concat([old[~old["paper"].isin(set(papers))], new.astype(str)],
+                            ignore_index=True)
+    new = new.astype(str)
+    order = sorted(range(len(new)), key=lambda i: (new["paper"].iloc[i],
+                                                   natural_key(new["claim"].iloc[i])))
+    new = new.iloc[order]
+    tmp = path.with_name(path.name + ".tmp")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    new.to_csv(tmp, index=False, lineterminator="\n")
+    os.replace(tmp, path)
 
 
 def write_claims_csv(df: pd.DataFrame, path: Path) -> None:

@@ -345,7 +345,11 @@ def _paper_section(
         counts = _claims_counts(paper_claims)
         out += [
             f"**{counts['reproduced']} of {len(paper_claims)} reproduced** "
-            f"({counts['not_reproduced']} not reproduced, {counts['not_run']} not run).",
+            f"({counts['partly_reproduced']} partly reproduced, "
+            f"{counts['not_reproduced']} not reproduced, {counts['not_run']} not run). "
+            "Claims judged clause by clause list each clause's figure, bound, verdict and "
+            "margin; a clause within 10 % of its bound is named under `marginal` "
+            "(results/claim_clauses.csv has one row per clause).",
             "",
             markdown_table(paper_claims.columns, paper_claims.itertuples(index=False)),
             "",
@@ -447,6 +451,7 @@ def render_report(
             (
                 paper,
                 f"{counts['reproduced']} of {n_claims}",
+                counts["partly_reproduced"],
                 counts["not_reproduced"],
                 counts["not_run"],
                 f"{completed} of {len(runs[paper])}",
@@ -456,7 +461,8 @@ def render_report(
         "## Overview",
         "",
         markdown_table(
-            ("paper", "reproduced", "not reproduced", "not run", "runs completed"), overview
+            ("paper", "reproduced", "partly reproduced", "not reproduced", "not run",
+             "runs completed"), overview
         )
         if overview
         else "_No papers found._",
