@@ -76,7 +76,11 @@ def _trace(n: int = 200, dt: float = 0.01) -> pd.DataFrame:
 
 
 def _not_met(res: ClaimResult) -> str:
-    assert res.status == "not_reproduced", res.measured
+    """The failing clauses' names; the status says whether some other clause held."""
+    failing = [c for c in res.clauses if not c.holds]
+    assert failing, res.measured
+    want = "partly_reproduced" if len(failing) < len(res.clauses) else "not_reproduced"
+    assert res.status == want, res.measured
     return res.measured.split(" -- not met: ", 1)[1]
 
 
@@ -126,9 +130,9 @@ def test_motion_split() -> None:
 
 @pytest.mark.parametrize("kwargs, clause", [
     ({"e_end": 40.0}, "error under 5% of its start"),
-    ({"approach_m": 0.1}, "translation towards the target >= 20 cm"),
-    ({"twist_deg": -60.0}, "in-plane rotation >= 90 deg"),
-    ({"swing_deg": 15.0}, "out-of-plane rotation >= 30 deg"),
+    ({"approach_m": 0.1}, "significant translation towards the target"),
+    ({"twist_deg": -60.0}, "in-plane rotation"),
+    ({"swing_deg": 15.0}, "out-of-plane rotation"),
 ])
 def test_claim1(kwargs: dict, clause: str) -> None:
     res = _reproduces(cl.check_1, {"simulation": _run(_large_motion()),
@@ -201,7 +205,8 @@ def test_claim3(breaks: str) -> None:
         bad.loc[199, "status"] = "no_features"
     failed = _not_met(cl.check_3({"simulation": _run(_trace()),
                                   "experiment": _experiment(bad)}))
-    assert "experiment: every point found and inside the image" in failed
+    assert ("experiment: every point found at every step" in failed
+            or "experiment: inside Table I's bounds" in failed)
     if breaks == "nan_without_event":
         text = cl.check_3({"simulation": _run(_trace()), "experiment": _experiment(bad)})
         assert "point 7 missing from 1.20 s (its true projection is inside the image" in (
@@ -254,7 +259,7 @@ def _near_obstacles(n: int = 200) -> pd.DataFrame:
 
 
 @pytest.mark.parametrize("breaks, clause", [
-    ("contact", "collision-free"), ("never_fails", "DCC fails somewhere"),
+    ("contact", "collision-free"), ("never_fails", "DCC fails near the obstacles"),
     ("far", "DCC fails closer to the obstacles"), ("fast", "motion slower under the bounds")])
 def test_claim5(breaks: str, clause: str) -> None:
     events = [(10.0, "dcc_fail", "eq. (20) fails")]
@@ -321,3 +326,11 @@ def test_whole_run_declarations() -> None:
     assert {c.claim: c.whole_run for c in cl.CLAIMS} == {
         "1": ("simulation",), "2": ("simulation", "experiment"),
         "3": ("simulation", "experiment"), "4": (), "5": ("experiment",), "6": (), "7": ()}
+
+
+def test_every_claim_quotes_the_paper_and_every_clause_names_its_source() -> None:
+    """Issue 18: the paper's words beside each check, a source beside each threshold."""
+    for claim in cl.CLAIMS:
+        assert claim.quote.startswith(("Sec.", "Fig.")) and '"' in claim.quote, claim.claim
+    res = cl.check_1({"simulation": _run(_large_motion()), "simulation_render": _render_run()})
+    assert res.clauses and all(c.source.split(":")[0] in ("paper", "ours") for c in res.clauses)

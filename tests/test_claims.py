@@ -303,6 +303,8 @@ def test_clause_verdict_margin_and_marginal_flag() -> None:
     zero = Clause("no collision", 0.0, "<=", 0.0, "-", "paper: 'collision-free'")
     assert zero.holds and not zero.marginal  # no relative margin against a zero bound
     assert "holds" in c.summary() and "MARGINAL" in c.summary()
+    count = Clause("broke a constraint", 1, ">=", 1, "-", "paper: x", relative=False)
+    assert count.holds and not count.marginal and count.margin == 0.0
     with pytest.raises(UnknownChoiceError):
         Clause("x", 1.0, "=<", 2.0, "-", "ours: x")
     with pytest.raises(ConfigError):

@@ -78,6 +78,9 @@ class Clause:
         unit: unit of ``measured`` and ``threshold`` ("-" for a count or a ratio).
         source: where the threshold comes from: "paper: <quote or section>" or
             "ours: <why>".
+        relative: the margin relative to the threshold means something (a bound on a size);
+            False for a count or a numerical tolerance around zero (then no relative margin
+            and never ``marginal``: the signed margin says it).
     """
 
     name: str
@@ -86,6 +89,7 @@ class Clause:
     threshold: float
     unit: str
     source: str
+    relative: bool = True
 
     def __post_init__(self) -> None:
         if self.op not in _OPS:
@@ -110,8 +114,10 @@ class Clause:
 
     @property
     def relative_margin(self) -> float:
-        """``margin / |threshold|`` (NaN for a zero threshold)."""
-        return self.margin / abs(self.threshold) if self.threshold != 0 else math.nan
+        """``margin / |threshold|`` (NaN for a zero threshold or ``relative=False``)."""
+        if not self.relative or self.threshold == 0:
+            return math.nan
+        return self.margin / abs(self.threshold)
 
     @property
     def marginal(self) -> bool:
