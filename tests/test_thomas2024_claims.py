@@ -52,33 +52,58 @@ def _contact(df: pd.DataFrame, col: str, t0: float, value: float = 0.005) -> Non
     df.loc[df["t"] >= t0 - 1e-9, col] = value
 
 
+def _fails(res) -> bool:  # type: ignore[no-untyped-def]
+    """A failing claim: partly reproduced when some clause still holds, else not."""
+    failing = [c for c in res.clauses if not c.holds]
+    want = "partly_reproduced" if 0 < len(failing) < len(res.clauses) else "not_reproduced"
+    return bool(failing) and res.status == want
+
+
 def _assert_pass_and_fail(check: Callable[[dict[str, RunFiles]], object], name: str,
                           good: RunFiles, bad: RunFiles, clause: str) -> None:
     res = check({name: good})
     assert res.status == "reproduced", res.measured
     res = check({name: bad})
-    assert res.status == "not_reproduced", res.measured
+    assert _fails(res), res.measured
     assert clause in res.measured.split(" -- not met: ", 1)[1]
 
 
 # ------------------------------------------------------------------ claim 1
 def _case1_converging() -> pd.DataFrame:
+    """Sensor 3 of ring 1 ends at its threshold: measured 5 mm inside (noise), truly 1 mm
+    outside; sensor 7 of ring 2 dips 2 cm inside its threshold at 5 s and comes back (the
+    noise-free CBFs are r{k}_dtrue{i} - delta*, thresholds (0.04, 0.08) m)."""
     df = _base(300)
     df["r1_cbf3"] = np.linspace(0.3, -0.005, 300)  # at the threshold up to noise
+    for k, thr in ((1, 0.04), (2, 0.08)):
+        for i in range(1, 19):
+            df[f"r{k}_dtrue{i}"] = df[f"r{k}_cbf{i}"] + thr
+    df["r1_dtrue3"] = np.linspace(0.3, 0.001, 300) + 0.04
+    df.loc[150:160, "r2_dtrue7"] = 0.08 - 0.02  # an excursion, brought back
     return df
 
 
+def _run1(df: pd.DataFrame) -> RunFiles:
+    return RunFiles(trace=df, events=pd.DataFrame(columns=["t", "step", "kind", "detail"]),
+                    manifest={"summary": {}, "config": {"thresholds": [0.04, 0.08]}}, scene={})
+
+
 @pytest.mark.parametrize("breaks, clause", [
-    ("e", "||e_4p|| under"), ("cbf", "CBFs >= -1 cm"), ("contact", "no contact")])
+    ("e", "||e_4p|| under"), ("not_back", "every excursion out of the safe set is brought back"),
+    ("contact", "no contact")])
 def test_claim1(breaks: str, clause: str) -> None:
+    """Issue 18: an excursion that comes back passes (the paper brings sensors back to the
+    safe set), one still outside at the end fails alone; so do convergence and contact."""
+    good = cl.check_1({"case1": _run1(_case1_converging())})
+    assert "deepest excursion out of the safe set -2.00 cm" in good.measured
     bad = _case1_converging()
     if breaks == "e":
         _set_e(bad, np.linspace(300, 30, len(bad)))
-    elif breaks == "cbf":
-        bad.loc[150, "r2_cbf7"] = -0.02
+    elif breaks == "not_back":
+        bad.loc[290:, "r2_dtrue7"] = 0.08 - 0.001
     else:
         bad.loc[200:, "dist_min"] = -0.001
-    _assert_pass_and_fail(cl.check_1, "case1", _run(_case1_converging()), _run(bad), clause)
+    _assert_pass_and_fail(cl.check_1, "case1", _run1(_case1_converging()), _run1(bad), clause)
 
 
 # ------------------------------------------------------------------ claim 2
@@ -105,7 +130,7 @@ def _case1_events(shift: float = 0.0) -> pd.DataFrame:
 
 
 @pytest.mark.parametrize("breaks, clause", [
-    ("late", "within 1 s of the paper's"),
+    ("late", "time off the paper's"),
     ("ring1_first", "order ring 2, ring 1, ring 2"),
     ("same_side", "order ring 2, ring 1, ring 2"),
     ("left_first", "meets the right obstacle"),
@@ -134,7 +159,7 @@ def test_claim3(breaks: str, clause: str) -> None:
     assert "ring 1 at 4.00 s (paper ~4 s)" in good.measured
     assert "ring 2 other side at 5.00 s (paper ~5 s)" in good.measured
     res = cl.check_3({"case1": _run(bad)})
-    assert res.status == "not_reproduced" and clause in res.measured.split(" -- not met: ")[1]
+    assert _fails(res) and clause in res.measured.split(" -- not met: ")[1]
 
 
 def test_group_directions() -> None:
@@ -183,7 +208,7 @@ def test_claim4(breaks: str, clause: str) -> None:
     assert good.status == "reproduced", good.measured
     assert "sensor 6 at 1.3 cm (our number; the paper's is 9)" in good.measured
     res = cl.check_4({"case2": _run(bad, events)})
-    assert res.status == "not_reproduced" and clause in res.measured.split(" -- not met: ")[1]
+    assert _fails(res) and clause in res.measured.split(" -- not met: ")[1]
 
 
 # ------------------------------------------------------------------ claim 5
@@ -195,7 +220,7 @@ def test_claim5_oscillation_metric_orders_runs() -> None:
     res = cl.check_5({"case2": _run(smooth), "case2_coarse": _run(osc)})
     assert res.status == "reproduced"
     res = cl.check_5({"case2": _run(osc), "case2_coarse": _run(smooth)})
-    assert res.status == "not_reproduced"
+    assert _fails(res)
 
 
 # ------------------------------------------------------------------ claim 6
@@ -259,9 +284,9 @@ def test_hand_windows() -> None:
     ("three", "4 approaches of ring 2 in 5-18 s and 4 of ring 1 in 20-30 s"),
     ("outside", "4 approaches of ring 2 in 5-18 s and 4 of ring 1 in 20-30 s"),
     ("no_rise", "every approach raises ||e_4p||"),
-    ("no_return", "returns under 3 px"),
-    ("deep_cbf", "min CBF within 1 cm of 0"),
-    ("far_cbf", "min CBF within 1 cm of 0"),
+    ("no_return", "returns to ~0"),
+    ("deep_cbf", "min CBF to ~0"),
+    ("far_cbf", "min CBF to ~0"),
     ("contact", "no contact"),
 ])
 def test_claim7(breaks: str, clause: str) -> None:
@@ -292,7 +317,7 @@ def test_claim8_kappa_zero() -> None:
     assert cl.check_8({"case1": _run(df)}).status == "reproduced"
     df.loc[len(df) - 1, "r1_kappa3"] = 0.05
     res = cl.check_8({"case1": _run(df)})
-    assert res.status == "not_reproduced" and "not met" in res.measured
+    assert _fails(res) and "not met" in res.measured
 
 
 def test_groups_are_adjacent_and_cyclic() -> None:
@@ -305,3 +330,9 @@ def test_whole_run_declarations() -> None:
     assert {c.claim: c.whole_run for c in cl.CLAIMS} == {
         "1": (), "2": (), "3": (), "4": (), "5": ("case2_coarse",), "6": ("parallel",),
         "7": ("case3",), "8": ()}
+
+
+def test_every_claim_quotes_the_paper() -> None:
+    """Issue 18: the paper's words beside each check."""
+    for claim in cl.CLAIMS:
+        assert claim.quote.startswith("Sec.") and '"' in claim.quote, claim.claim

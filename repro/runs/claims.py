@@ -102,9 +102,10 @@ class Clause:
 
     @property
     def holds(self) -> bool:
-        """True when ``measured op threshold`` (False for a NaN figure)."""
-        return bool(math.isfinite(self.measured) and _OPS[self.op](self.measured,
-                                                                  self.threshold))
+        """True when ``measured op threshold`` (False for a NaN figure; an infinite one
+        compares, e.g. a ratio over zero)."""
+        return bool(not math.isnan(self.measured) and _OPS[self.op](self.measured,
+                                                                   self.threshold))
 
     @property
     def margin(self) -> float:
