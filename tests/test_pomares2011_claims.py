@@ -19,6 +19,14 @@ N = 2501  # 25 s at 100 Hz rows
 T = np.arange(N) * 0.01
 
 
+
+
+def _fails(res) -> bool:  # type: ignore[no-untyped-def]
+    """A failing claim: partly reproduced when some clause still holds, else not."""
+    failing = [c for c in res.clauses if not c.holds]
+    want = "partly_reproduced" if 0 < len(failing) < len(res.clauses) else "not_reproduced"
+    return bool(failing) and res.status == want
+
 def _run(df: pd.DataFrame, mins: dict[str, float] | None = None) -> RunFiles:
     ev = pd.DataFrame([], columns=["t", "step", "kind", "detail"])
     summary = {"stop_reason": "duration reached",
@@ -101,19 +109,19 @@ def _wander() -> pd.DataFrame:
 @pytest.mark.parametrize("runs, clause", [
     (_runs(exp1=_exp1(e_s_px=np.full(N, 18.0))), "reach s*"),
     (_runs(exp1=_late_reach()), "still moves"),
-    (_runs(exp1=_wander()), "stay within"),
+    (_runs(exp1=_wander()), "stay there"),
     (_runs(exp1=_exp1(e_u_px=np.full(N, 5.0))), "reach s_u*"),
 ])
 def test_claim_1_fails_on_each_clause(runs: dict[str, RunFiles], clause: str) -> None:
     res = cl.check_1(runs)
-    assert res.status == "not_reproduced" and clause in res.measured, res.measured
+    assert _fails(res) and clause in res.measured, res.measured
 
 
 def test_claim_2_fails_when_V_rises_or_the_base_never_stops() -> None:
     V = 2e-3 * np.exp(-0.2 * T)
     V[2200] *= 1.5  # a rise after the base stopped
     res = cl.check_2(_runs(exp1=_exp1(V=V)))
-    assert res.status == "not_reproduced" and "non-increasing" in res.measured
+    assert _fails(res) and "non-increasing" in res.measured
     V = 2e-3 * np.exp(-0.2 * T)
     V[1000] *= 1.5  # a rise while the base moves: allowed
     assert cl.check_2(_runs(exp1=_exp1(V=V))).status == "reproduced"
@@ -122,7 +130,7 @@ def test_claim_2_fails_when_V_rises_or_the_base_never_stops() -> None:
     assert res.status == "not_reproduced" and "never still" in res.measured
     short = _exp1(**{f"pa10_qd{i}": np.where(T > 24.5, 0.0, 0.01) for i in range(1, 7)})
     res = cl.check_2(_runs(exp1=short))
-    assert res.status == "not_reproduced" and "still for" in res.measured
+    assert res.status == "not_reproduced" and "not testable" in res.measured
 
 
 @pytest.mark.parametrize("col, value, clause", [
@@ -131,24 +139,24 @@ def test_claim_2_fails_when_V_rises_or_the_base_never_stops() -> None:
 ])
 def test_claim_3_fails_on_each_clause(col: str, value: float, clause: str) -> None:
     res = cl.check_3(_runs(exp2=_exp2(**{col: np.full(N, value)})))
-    assert res.status == "not_reproduced" and clause in res.measured, res.measured
+    assert _fails(res) and clause in res.measured, res.measured
 
 
 def test_claim_4_fails_on_each_clause() -> None:
     res = cl.check_4(_runs(d_mini=0.035))
-    assert res.status == "not_reproduced" and "moves the mini-robot away" in res.measured
+    assert _fails(res) and "moves the mini-robot away" in res.measured
     res = cl.check_4(_runs(d_mini=-0.01, d_base=-0.05))
-    assert res.status == "not_reproduced" and "dist > 0" in res.measured
+    assert _fails(res) and "dist > 0" in res.measured
     res = cl.check_4(_runs(d_arm=-0.001))
-    assert res.status == "not_reproduced" and "dist > 0" in res.measured
+    assert _fails(res) and "dist > 0" in res.measured
     f1y = _exp2()
     f1y.loc[(T > 10) & (T < 10.5), "e_f2y_px"] = 30.0
     res = cl.check_4(_runs(exp2=f1y))
-    assert res.status == "not_reproduced" and "held coordinate (f2y) stays" in res.measured
+    assert _fails(res) and "held coordinate (f2y) stays" in res.measured
     res = cl.check_4(_runs(exp2=_exp2(e_s_px=np.full(N, 20.0))))
-    assert res.status == "not_reproduced" and "s -> s*" in res.measured
+    assert _fails(res) and "s -> s*" in res.measured
     res = cl.check_4(_runs(exp2=_exp2(active_span=(9.7, 30.0))))  # the human never leaves
-    assert res.status == "not_reproduced" and "s -> s*" in res.measured
+    assert _fails(res) and "NaN if he never leaves" in res.measured
     res = cl.check_4(_runs(exp2=_exp2(active_span=(0.0, 0.0))))
     assert res.status == "not_reproduced" and "never came within dmin" in res.measured
     # the human touching without e2 is said
@@ -164,3 +172,9 @@ def test_claim_2_window_starts_after_the_last_motion() -> None:
     df = _exp1(V=V, **{f"pa10_qd{i}": qd for i in range(1, 7)})
     res = cl.check_2(_runs(exp1=df))
     assert res.status == "reproduced" and "still from 19.00 s" in res.measured, res.measured
+
+
+def test_claims_1_to_4_quote_the_paper() -> None:
+    """Issue 18: the paper's words beside each check."""
+    for claim in cl.CLAIMS_1_4:
+        assert claim.quote.startswith("Sec.") and '"' in claim.quote, claim.claim
