@@ -76,12 +76,12 @@ def _base() -> pd.DataFrame:
 
 
 def _runs(exp1: pd.DataFrame | None = None, exp2: pd.DataFrame | None = None,
-          d_mini: float = 0.06, d_arm: float = 0.3, d_base: float = 0.03
-          ) -> dict[str, RunFiles]:
+          d_mini: float = 0.06, d_arm: float = 0.3, d_base: float = 0.03,
+          d_hand: float = 0.25) -> dict[str, RunFiles]:
     return {"exp1": _run(_exp1() if exp1 is None else exp1),
             "exp2": _run(_exp2() if exp2 is None else exp2,
                          {"mini_dist_human_hand_r": d_mini, "mini_dist_table": 0.01,
-                          "pa10_dist_human_torso": d_arm}),
+                          "pa10_dist_human_torso": d_arm, "bh8_dist_human_hand_l": d_hand}),
             "exp2_no_secondary": _run(_base(), {"mini_dist_human_hand_r": d_base})}
 
 
@@ -148,6 +148,8 @@ def test_claim_4_fails_on_each_clause() -> None:
     res = cl.check_4(_runs(d_mini=-0.01, d_base=-0.05))
     assert _fails(res) and "dist > 0" in res.measured
     res = cl.check_4(_runs(d_arm=-0.001))
+    assert _fails(res) and "dist > 0" in res.measured
+    res = cl.check_4(_runs(d_hand=-0.001))  # issue 18: the hand on the PA-10 counts too
     assert _fails(res) and "dist > 0" in res.measured
     f1y = _exp2()
     f1y.loc[(T > 10) & (T < 10.5), "e_f2y_px"] = 30.0

@@ -295,22 +295,34 @@ def check_6(runs: dict[str, RunFiles]) -> ClaimResult:
 
 
 def check_7(runs: dict[str, RunFiles]) -> ClaimResult:
+    """The whole controller step (NMPC with its retries, DCC and the bisection: ``ctrl_s``),
+    not only the last NMPC solve (issue 18), against the paper's 10 Hz, read as a sustained
+    rate (the 95th percentile of the step; the slowest step and solve_s reported)."""
     parts, clauses = [], []
     for name in ("simulation", "experiment"):
-        s_all = runs[name].trace["solve_s"].to_numpy(float)
-        s = s_all[np.isfinite(s_all)]  # the step that found a point lost solves nothing
+        df = runs[name].trace
+        col = "ctrl_s" if "ctrl_s" in df.columns else "solve_s"
+        c_all = df[col].to_numpy(float)
+        c = c_all[np.isfinite(c_all)]
+        s_all = df["solve_s"].to_numpy(float)
+        s = s_all[np.isfinite(s_all)]
         cfg = runs[name].manifest["config"]
-        if not len(s):
-            parts.append(f"{name}: no solve times recorded")
-            clauses.append(Clause(f"{name}: solve times recorded", 0, ">=", 1, "-",
+        if not len(c):
+            parts.append(f"{name}: no controller times recorded")
+            clauses.append(Clause(f"{name}: controller times recorded", 0, ">=", 1, "-",
                                   "ours: nothing to judge", relative=False))
             continue
-        parts.append(f"{name} (Np = {cfg['Np']}): NMPC (+ DCC) solve over {len(s)} steps: "
-                     f"median {np.median(s) * 1e3:.2f} ms, p95 {np.percentile(s, 95) * 1e3:.2f} "
-                     f"ms, max {s.max() * 1e3:.1f} ms")
-        clauses.append(Clause(f"{name}: every step under {1e3 / RATE_HZ:.0f} ms (slowest)",
-                              float(s.max()), "<", 1.0 / RATE_HZ, "s", "paper: 'The maximum "
-                              "control rate that is achieved ... is 10Hz' (Sec. V-A5)"))
+        parts.append(f"{name} (Np = {cfg['Np']}): whole controller step ({col}) over {len(c)} "
+                     f"steps: median {np.median(c) * 1e3:.2f} ms, p95 "
+                     f"{np.percentile(c, 95) * 1e3:.2f} ms, max {c.max() * 1e3:.1f} ms"
+                     + (f"; NMPC solves alone: median {np.median(s) * 1e3:.2f} ms, max "
+                        f"{s.max() * 1e3:.1f} ms" if len(s) else ""))
+        clauses.append(Clause(f"{name}: the controller sustains {RATE_HZ:g} Hz (95th "
+                              "percentile of the whole step)",
+                              float(np.percentile(c, 95)), "<", 1.0 / RATE_HZ, "s",
+                              "paper: 'The maximum control rate that is achieved ... is "
+                              "10Hz' (Sec. V-A5), a sustained rate; ours: the 95th "
+                              "percentile (the slowest step is reported)"))
     return ClaimResult.from_clauses("; ".join(parts), clauses)
 
 
@@ -372,7 +384,8 @@ CLAIMS: tuple[Claim, ...] = (
     Claim(PAPER, "6", "DCC never certifies a segment that collides (conservative)",
           "0 certified segments in collision", ("dcc_audit",), check_6,
           quote=QUOTES["6"]),
-    Claim(PAPER, "7", "The controller runs at >= 10 Hz", "solve + DCC < 100 ms per step",
+    Claim(PAPER, "7", "The controller runs at >= 10 Hz",
+          "the whole controller step (NMPC, DCC, bisection) < 100 ms",
           ("simulation", "experiment"), check_7,
           quote=QUOTES["7"]),
 )

@@ -212,7 +212,10 @@ def check_4(runs: dict[str, RunFiles]) -> ClaimResult:
     t = df["t"].to_numpy(float)
     active = df["secondary_active"].fillna(False).astype(bool).to_numpy()
     d_mini, t_mini, bone = _human_min(run, "mini_")
-    d_arm, _, bone_arm = _human_min(run, "pa10_")
+    # the PA-10 side: its arm and the BH8 hand it carries (joints and finger motors); issue
+    # 18: the hand came 4.4 cm closer to the human than the arm and was left out
+    d_arm, _, bone_arm = min((_human_min(run, pre) for pre in ("pa10_", "bh8_", "motor_")),
+                             key=lambda x: x[0])
     d_base, t_base, bone_base = _human_min(base, "mini_")
     if not active.any():
         return ClaimResult(f"the human never came within dmin of the mini-robot (min true "
@@ -229,7 +232,7 @@ def check_4(runs: dict[str, RunFiles]) -> ClaimResult:
     shift = float(np.max(np.linalg.norm(cam[:n] - cam_b[:n], axis=1)))
     measured = (f"secondary task active {t[k_on]:.2f}-{t[k_off]:.2f} s "
                 f"({active.mean() * (t[-1] - t[0]):.1f} s); min true distance human - "
-                f"mini-robot {d_mini * 100:.1f} cm ({bone}, {t_mini:.2f} s), human - PA-10 "
+                f"mini-robot {d_mini * 100:.1f} cm ({bone}, {t_mini:.2f} s), human - PA-10 and hand "
                 f"{d_arm * 100:.1f} cm ({bone_arm}), over every control step; without the "
                 f"secondary task {d_base * 100:.1f} cm ({bone_base}, {t_base:.2f} s)"
                 f"{' -- the human touches the mini-robot' if d_base <= 0 else ''}; camera "
