@@ -90,7 +90,8 @@ def test_fails_on_each_clause(clause: str) -> None:
     df = _trace()
     BREAKS[clause](df)
     res = check_table1(_runs(df))
-    assert res.status == "not_reproduced", (clause, res.measured)
+    assert res.status in ("not_reproduced", "partly_reproduced"), (clause, res.measured)
+    assert any(not c.holds and clause in c.name for c in res.clauses), res.measured
     failed = res.measured.split("not met:")[1]
     assert clause in failed and failed.count(";") == 0, failed  # only that clause
 
@@ -99,4 +100,5 @@ def test_fails_when_the_approach_or_the_hand_task_never_ends() -> None:
     res = check_table1(_runs(_trace(), _events(switch=False)))
     assert res.status == "not_reproduced" and "never reached s_u*" in res.measured
     res = check_table1(_runs(_trace(), _events(end=False)))
-    assert res.status == "not_reproduced" and "task ends" in res.measured
+    assert res.status in ("not_reproduced", "partly_reproduced") and "task ends" in (
+        res.measured)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from experiments.pomares2011.exp3_claims import CLAIM_5
+from experiments.pomares2011.exp3_claims import CLAIM_5, CLAIM_5B
 from experiments.pomares2011.task_claims import CLAIM_TABLE1
 from repro.runs.claims import Claim, ClaimResult, Clause
 from repro.runs.trace import RunFiles
@@ -277,4 +277,4 @@ CLAIMS_1_4: tuple[Claim, ...] = (
 )
 
 #: Claims 1-4 (this module) and claim 5 (experiment 3, :mod:`experiments.pomares2011.exp3_claims`).
-CLAIMS: tuple[Claim, ...] = (*CLAIMS_1_4, CLAIM_5, CLAIM_TABLE1)
+CLAIMS: tuple[Claim, ...] = (*CLAIMS_1_4, CLAIM_5, CLAIM_5B, CLAIM_TABLE1)

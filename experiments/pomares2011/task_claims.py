@@ -11,12 +11,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from experiments.pomares2011.exp3_claims import _drop, _task_rows, _verdict
-from repro.runs.claims import Claim, ClaimResult
+from experiments.pomares2011.exp3_claims import _drop, _task_rows
+from repro.runs.claims import Claim, ClaimResult, Clause
 from repro.runs.trace import RunFiles
 from repro.sim.barrett import COUNTS_PER_MOTOR_REV
 
 PAPER = "pomares2011"
+
+
+def _verdict(measured: str, checks: dict[str, bool]) -> ClaimResult:
+    """Each check a yes/no clause (1 = holds); Table 1 is its rule, the figures ours are
+    named in the check's text (issue 18)."""
+    return ClaimResult.from_clauses(measured, [
+        Clause(name, float(bool(ok)), ">=", 1.0, "-", "paper: Table 1 (Sec. 2)" if not any(
+            ch.isdigit() for ch in name) else "ours: the figure in the clause; Table 1 (Sec. 2)",
+            relative=False) for name, ok in checks.items()])
 #: The hand "does not perform any movement" during the approach: its measured motor angles
 #: stay within this of their value at the start [counts]. ours: 10 counts = 0.015 rad of
 #: motor, 0.007 deg of a proximal joint.
@@ -92,4 +101,11 @@ CLAIM_TABLE1 = Claim(
     f"hand still during the approach (<= {HAND_STILL_COUNTS:g} counts); PA-10 commands 0 and "
     f"flange within {ARM_STILL_M * 1e3:g} mm during the manipulation; dots kept, camera error "
     f"< {MINI_REACHED_PX:g} px at the end; Algorithm 1 runs and ends; no drop before its end",
-    ("task",), check_table1)
+    ("task",), check_table1,
+    quote=('Sec. 2: "the execution of the manipulation tasks is divided into two main phases '
+           '(see Table 1): the first phase involves the robot approaching towards the object '
+           'to be manipulated, and the second phase constitutes the manipulation of this '
+           'object. During the first phase, the trajectory of the robotic manipulator is '
+           'controlled by the RVC ... Meanwhile, the trajectory of the mini-robot is obtained '
+           'by the direct hybrid controller." Table 1: hand "no control" while approaching; '
+           'PA-10 "no control", hand "tactile control" while manipulating.'))
