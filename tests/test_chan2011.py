@@ -174,7 +174,8 @@ def test_claim4_detects_broken_constraints() -> None:
     assert any("velocity" in b for b in cl._broken(_fake_run(1.5, lost=False)))
     assert any("field of view" in b for b in cl._broken(_fake_run(0.5, lost=True)))
     res = cl.check_4({"ibvs": _fake_run(1.5, False), "ibvs_saturated": ok})
-    assert res.status == "not_reproduced" and "saturator breaks a constraint" in res.measured
+    # issue 18: one of the two clauses holds (plain IBVS breaks the velocity limits)
+    assert res.status == "partly_reproduced" and "saturator breaks a constraint" in res.measured
 
 
 def test_a_feasible_iterate_at_the_iteration_limit_is_applied(tmp_path: Path) -> None:
