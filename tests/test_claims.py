@@ -209,6 +209,13 @@ def test_run_extent() -> None:
     text, failed = extent_note({"a": run([0.0, 0.1], {}, {"duration": 1.0})}, ("a",))
     assert failed and "a ended at 0.10 s of its 1 s" in text
     assert extent_note({"a": run([0.0, 0.1], {}, {"duration": 0.1})}, ("a",)) == ("", False)
+    # a run that ended on a done event (its task complete) counts as whole
+    done = run([0.0, 0.1], {"stop_reason": "converged"}, {"duration": 1.0})
+    done = RunFiles(done.trace, pd.DataFrame({"t": [0.1], "step": [1], "kind": ["converged"],
+                                              "detail": [""]}), done.manifest, {})
+    text, failed = extent_note({"a": done}, ("a",), ("converged",))
+    assert not failed and "its task was complete" in text
+    assert extent_note({"a": done}, ("a",))[1]  # without done events: early
 
 
 def test_claim_validation() -> None:

@@ -117,6 +117,7 @@ def check_1(runs: dict[str, RunFiles]) -> ClaimResult:
     df = run.trace
     e = df["e_rms_px"].to_numpy(float)
     moved, d0, d1, twist, swing = _motion(run)
+    stop_px = float((run.manifest.get("config") or {}).get("stop_px", 0.5))
     t95 = df["t"].to_numpy()[np.argmax(e <= CONVERGED_FRACTION * e[0])] if np.any(
         e <= CONVERGED_FRACTION * e[0]) else float("nan")
     return ClaimResult.from_clauses(
@@ -126,8 +127,10 @@ def check_1(runs: dict[str, RunFiles]) -> ClaimResult:
         f"axis and {swing:.0f} deg out of plane; with the estimated object pose 2-3 cm and "
         "10 deg off (Sec. III-A) and Table I's uncalibrated camera, with ideal point features "
         "as in the paper's simulation" + _rendered(runs),
-        [Clause(f"error under {CONVERGED_FRACTION:.0%} of its start", e[-1] / e[0], "<=",
-                CONVERGED_FRACTION, "-", OURS_CONVERGED),
+        [Clause("the camera reaches the desired position (final RMS pixel error; the run "
+                f"stops once under {stop_px:g} px for 0.2 s)", e[-1], "<", stop_px, "px",
+                "ours: the run's own convergence test, stop_px (a 1024 x 768 image); issue "
+                "18: was 'under 5 % of its start' on a 20 s run"),
          Clause("significant translation towards the target", d0 - d1, ">=", MIN_APPROACH_M,
                 "m", "ours: 'significant' (Sec. III-B) has no figure; 10x the pose error"),
          Clause("in-plane rotation", abs(twist), ">=", MIN_IN_PLANE_DEG, "deg",
@@ -361,17 +364,17 @@ CLAIMS: tuple[Claim, ...] = (
           f"converges; >= {MIN_APPROACH_M * 100:g} cm closer, >= {MIN_IN_PLANE_DEG:g} deg in "
           f"plane, >= {MIN_OUT_OF_PLANE_DEG:g} deg out of plane",
           ("simulation", "simulation_render"), check_1, whole_run=("simulation",),
-          quote=QUOTES["1"]),
+          quote=QUOTES["1"], done_events=("converged",)),
     Claim(PAPER, "2", "Joint position and velocity limits are never exceeded; velocities ride "
           "just under their limits",
           f"within limits (commanded and measured); >= {RIDE_MIN_JOINTS} joints at >= "
           f"{RIDE_FRACTION:.0%} of their limit for >= {RIDE_MIN_S:g} s",
           ("simulation", "experiment"), check_2, whole_run=("simulation", "experiment"),
-          quote=QUOTES["2"]),
+          quote=QUOTES["2"], done_events=("converged",)),
     Claim(PAPER, "3", "All feature points stay inside the image the whole time",
           "every point found, u in [1, 1023], v in [1, 767]", ("simulation", "experiment"),
           check_3, whole_run=("simulation", "experiment"),
-          quote=QUOTES["3"]),
+          quote=QUOTES["3"], done_events=("converged",)),
     Claim(PAPER, "4", "Plain IBVS, or IBVS with a velocity saturator, on the same task breaks a "
           "constraint (field of view, joint limit)", "each baseline breaks a constraint",
           ("ibvs", "ibvs_saturated"), check_4,

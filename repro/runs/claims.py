@@ -197,6 +197,9 @@ class Claim:
     whole_run: tuple[str, ...] = ()
     #: the paper's sentence(s) the check tests, with their section
     quote: str = ""
+    #: event kinds that end a run with its task complete (a convergence stop): such a run
+    #: counts as whole for ``whole_run``
+    done_events: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("paper", "claim"):
@@ -284,12 +287,15 @@ def run_extent(run: RunFiles) -> RunExtent:
                      step if math.isfinite(step) else 0.0)
 
 
-def extent_note(runs: Mapping[str, RunFiles], whole_run: Sequence[str] = ()) -> tuple[str, bool]:
+def extent_note(runs: Mapping[str, RunFiles], whole_run: Sequence[str] = (),
+                done_events: Sequence[str] = ()) -> tuple[str, bool]:
     """(text for ``measured``, True if a run of ``whole_run`` ended early).
 
     Names every run that ended before its configured duration, with its stop reason; for a
     run of ``whole_run`` it adds that the claim cannot be reproduced on the part that never
-    ran. Empty text when every run covered its duration."""
+    ran -- unless the run ended on one of ``done_events`` (its task complete, e.g. a
+    convergence test): then the whole task ran. Empty text when every run covered its
+    duration."""
     notes, failed = [], False
     for name, run in runs.items():
         extent = run_extent(run)
@@ -297,7 +303,11 @@ def extent_note(runs: Mapping[str, RunFiles], whole_run: Sequence[str] = ()) -> 
             continue
         note = (f"{name} ended at {extent.sim_time_s:.2f} s of its {extent.duration_s:g} s "
                 f"({extent.stop_reason})")
-        if name in whole_run:
+        ev = run.events
+        done = bool(done_events) and len(ev) > 0 and bool(ev["kind"].isin(done_events).any())
+        if done:
+            note += "; its task was complete: judged on the whole task"
+        elif name in whole_run:
             failed = True
             note += (f"; the claim covers the whole run: not reproduced on the "
                      f"{extent.missing_s:.1f} s that never ran")
@@ -426,7 +436,7 @@ def evaluate_claims(
             message = f"check returned {type(result).__name__}, not ClaimResult"
             rows.append(_row(claim, message, "not_run"))
             continue
-        extent, cut_short = extent_note(runs, claim.whole_run)
+        extent, cut_short = extent_note(runs, claim.whole_run, claim.done_events)
         status = ("not_reproduced" if cut_short and result.status in (
             "reproduced", "partly_reproduced") else result.status)
         rows.append(_row(claim, result.measured + extent + audit_note(runs), status,
