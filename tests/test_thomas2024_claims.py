@@ -341,6 +341,7 @@ def test_whole_run_declarations() -> None:
     """Claims over the whole duration name their runs (an early end fails them)."""
     assert {c.claim: c.whole_run for c in cl.CLAIMS} == {
         "1": (), "2": (), "3": (), "4": (), "5": ("case2_coarse",), "6": ("parallel",),
+        "6b": ("parallel_noisy",),
         "7": ("case3",), "8": ()}
 
 
@@ -364,3 +365,13 @@ def test_claim7_does_not_need_every_approach_to_move_the_camera() -> None:
     res = cl.check_7({"case3": _run(df)})
     assert res.status == "reproduced", res.measured
     assert "ring 2 0.0," in res.measured  # the flat approach is reported
+
+
+def test_claim6b_is_claim6_on_the_noisy_run() -> None:
+    """Issue 18: the noisy parallel run is its own row, judged like claim 6."""
+    claim = next(c for c in cl.CLAIMS if c.claim == "6b")
+    assert claim.runs == ("parallel_noisy",)
+    df = _parallel_calm()
+    res = cl.check_6b({"parallel_noisy": _run(df)})
+    assert res.status == cl.check_6({"parallel": _run(df)}).status == "reproduced"
+    assert "with the 2 mm ToF noise" in res.measured

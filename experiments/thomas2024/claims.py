@@ -320,8 +320,8 @@ def check_5(runs: dict[str, RunFiles]) -> ClaimResult:
 
 
 # ------------------------------------------------------------------ claim 6
-def check_6(runs: dict[str, RunFiles]) -> ClaimResult:
-    run = runs["parallel"]
+def check_6(runs: dict[str, RunFiles], name: str = "parallel") -> ClaimResult:
+    run = runs[name]
     df = run.trace
     sc, hf = _oscillation(run)
     contact_end = [i for i in range(1, N + 1) if abs(df[f"r2_cbf{i}"].iloc[-1]) <= NEAR_CONTACT]
@@ -331,7 +331,10 @@ def check_6(runs: dict[str, RunFiles]) -> ClaimResult:
     return ClaimResult.from_clauses(
         f"ring-2 sensors at the threshold at the end {contact_end}; max final kappa "
         f"{k_end:.1e}; sign changes {sc:.2f}/s, energy above {OSC_CUTOFF_HZ:g} Hz {hf:.1%}; "
-        f"||e_4p|| {e0:.0f} -> {e_end:.1f} px (noise-free run)",
+        f"||e_4p|| {e0:.0f} -> {e_end:.1f} px ("
+        + ("noise-free run" if name == "parallel" else "with the 2 mm ToF noise") + ")"
+        + (f"; {int(df['qp_status'].eq('relaxed').sum())} of {len(df)} QPs slack-relaxed"
+           if "qp_status" in df.columns else ""),
         [Clause("two sensors at the threshold (sensors within 1 cm of it at the end)",
                 len(contact_end), ">=", 2, "-", "paper: 'two virtual contacts' (Sec. VI)",
                 relative=False),
@@ -345,6 +348,12 @@ def check_6(runs: dict[str, RunFiles]) -> ClaimResult:
 
 
 # ------------------------------------------------------------------ claim 7
+def check_6b(runs: dict[str, RunFiles]) -> ClaimResult:
+    """Beyond the paper (issue 18): claim 6 with the suite's 2 mm ToF noise; the paper's
+    statement is about the noise-free KKT conditions (claim 6 judges the noise-free run)."""
+    return check_6(runs, "parallel_noisy")
+
+
 def _hand_windows(df: pd.DataFrame) -> list[tuple[float, float]]:
     """(start, end) [s] of each hand approach, from the logged hand pose (parked below
     the floor, z = -5 m, between approaches)."""
@@ -500,6 +509,10 @@ CLAIMS: tuple[Claim, ...] = (
           "kappa = 0 although both constraints are active (Sec. VI, eq. 20)",
           "no oscillation; kappa = 0", ("parallel",), check_6, whole_run=("parallel",),
           quote=QUOTES["6"]),
+    Claim(PAPER, "6b", "Beyond the paper: claim 6's parallel planes with the suite's 2 mm "
+          "ToF noise (the paper's statement is about the exact constraints)",
+          "no oscillation; kappa = 0", ("parallel_noisy",), check_6b,
+          whole_run=("parallel_noisy",), quote=QUOTES["6"]),
     Claim(PAPER, "7", "Case 3: e_4p leaves ~0 at each hand approach (4 at ring 2 in 5-18 s, 4 at "
           "ring 1 in 20-30 s) and returns to ~0; CBFs reach ~0 at each approach; no collision",
           f"8 excursions, return to ~0, each approach's min CBF within {CBF_ZERO_TOL * 100:g} cm "
