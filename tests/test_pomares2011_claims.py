@@ -157,6 +157,12 @@ def test_claim_4_fails_on_each_clause() -> None:
     assert _fails(res) and "held coordinate (f2y) stays" in res.measured
     res = cl.check_4(_runs(exp2=_exp2(e_s_px=np.full(N, 20.0))))
     assert _fails(res) and "s -> s*" in res.measured
+    lost = _exp2()  # issue 18: dots lost at the end are not "s -> s*"
+    lost.loc[N - 5:, "e_s_px"] = np.nan
+    assert _fails(cl.check_4(_runs(exp2=lost)))
+    offset = _exp2()  # a constant offset from 272 px held steadily is no variation
+    offset["e_f2y_px"] = 5.0
+    assert cl.check_4(_runs(exp2=offset)).status == "reproduced"
     res = cl.check_4(_runs(exp2=_exp2(active_span=(9.7, 30.0))))  # the human never leaves
     assert _fails(res) and "NaN if he never leaves" in res.measured
     res = cl.check_4(_runs(exp2=_exp2(active_span=(0.0, 0.0))))

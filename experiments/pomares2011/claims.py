@@ -222,10 +222,13 @@ def check_4(runs: dict[str, RunFiles]) -> ClaimResult:
                            f"distance {d_mini * 100:.1f} cm): the secondary task never acted",
                            "not_reproduced")
     k_on, k_off = _first(active), int(np.flatnonzero(active)[-1])
-    f1y = np.abs(df["e_f2y_px"].to_numpy(float)[active])
-    f1y_max = float(np.nanmax(f1y))
+    # issue 18: the held coordinate's change from its value when the secondary task starts
+    # (the paper: "a small variation"), and its offset from 272 px, both reported
+    e_y = df["e_f2y_px"].to_numpy(float)
+    f1y_max = float(np.nanmax(np.abs(e_y[active])))
+    held_change = float(np.nanmax(np.abs(e_y[active] - e_y[k_on])))
     e_s = df["e_s_px"].to_numpy(float)
-    e_end = float(e_s[np.isfinite(e_s)][-1])
+    e_end = float(e_s[-1])  # the last row: dots lost at the end are NaN and fail
     cam = df[[f"camera_{a}" for a in "xyz"]].to_numpy(float)
     cam_b = base.trace[[f"camera_{a}" for a in "xyz"]].to_numpy(float)
     n = min(len(cam), len(cam_b))
@@ -236,8 +239,9 @@ def check_4(runs: dict[str, RunFiles]) -> ClaimResult:
                 f"{d_arm * 100:.1f} cm ({bone_arm}), over every control step; without the "
                 f"secondary task {d_base * 100:.1f} cm ({bone_base}, {t_base:.2f} s)"
                 f"{' -- the human touches the mini-robot' if d_base <= 0 else ''}; camera "
-                f"up to {shift * 100:.1f} cm from the baseline's path; held |f2y - 272| <= "
-                f"{f1y_max:.2f} px while active; after the human leaves, RMS error to s* "
+                f"up to {shift * 100:.1f} cm from the baseline's path; while active the held f2y "
+                f"moves up to {held_change:.2f} px from its value at the start of the task "
+                f"(|f2y - 272| <= {f1y_max:.2f} px); after the human leaves, RMS error to s* "
                 f"{e_end:.2f} px at {t[-1]:.1f} s")
     return ClaimResult.from_clauses(measured, [
         Clause("e2 moves the mini-robot away (min distance gained over the run without it)",
@@ -245,9 +249,9 @@ def check_4(runs: dict[str, RunFiles]) -> ClaimResult:
         Clause("dist > 0 always (both robots, every control step: the smaller minimum)",
                min(d_mini, d_arm), ">", 0.0, "m", "paper: 'to avoid the collision' (Sec. 7.2)",
                relative=False),
-        Clause("the held coordinate (f2y) stays at 272 px while active (largest |f2y - 272|)",
-               f1y_max, "<=", F1Y_TOL_PX, "px", "ours: 'a small variation' has no figure; "
-               "as s = s*"),
+        Clause("the held coordinate (f2y) stays while active (largest change from its value "
+               "when the secondary task starts)", held_change, "<=", F1Y_TOL_PX, "px",
+               "ours: 'a small variation' (Sec. 7.2) has no figure; as s = s*"),
         Clause("after the human leaves, s -> s* (final RMS; NaN if he never leaves)",
                e_end if k_off < len(t) - 1 else float("nan"), "<", REACHED_PX, "px",
                "ours: as s = s*")])
