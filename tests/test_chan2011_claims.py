@@ -345,3 +345,20 @@ def test_every_claim_quotes_the_paper_and_every_clause_names_its_source() -> Non
         assert claim.quote.startswith(("Sec.", "Fig.")) and '"' in claim.quote, claim.claim
     res = cl.check_1({"simulation": _run(_large_motion()), "simulation_render": _render_run()})
     assert res.clauses and all(c.source.split(":")[0] in ("paper", "ours") for c in res.clauses)
+
+
+def test_claim5_compares_speeds_at_equal_phase() -> None:
+    """Issue 18: a motion that slows down everywhere (early fast, late slow), with bounds in
+    its slow part at the speed of the free steps beside them, is not "slower under the
+    bounds" (comparing with every free step, the old check said it was)."""
+    df = _near_obstacles()
+    n = len(df)
+    box = (np.arange(n) >= 120) & (np.arange(n) < 140)
+    df["dcc_box"] = box
+    df["d_fcl"] = np.where(box, 0.05, 0.2)
+    speed = np.where(np.arange(n) < 100, 0.3, 0.05)  # slow from step 100 on, bounds or not
+    for i in range(1, 7):
+        df[f"qd{i}"] = speed
+    res = cl.check_5({"experiment": _experiment(df)})
+    slow = next(c for c in res.clauses if c.name.startswith("motion slower"))
+    assert not slow.holds and slow.measured == pytest.approx(1.0)
