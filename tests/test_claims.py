@@ -329,6 +329,11 @@ def test_claim_status_from_its_clauses() -> None:
     assert ClaimResult.from_clauses("m", [bad]).status == "not_reproduced"
     with pytest.raises(ConfigError):
         ClaimResult.from_clauses("m", [])
+    built = Clause("b", 3.0, "<=", 2.0, "-", "ours: b", evidence=False)
+    res = ClaimResult.from_clauses("m", [ok, built])  # by construction: reported, not counted
+    assert res.status == "reproduced" and "by construction" in built.summary()
+    with pytest.raises(ConfigError):
+        ClaimResult.from_clauses("m", [built])
 
 
 def test_clauses_reach_the_claims_table_and_the_clause_table(results: Path,

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.pomares2011.task_claims import CLAIM_TABLE1, check_table1
+from experiments.pomares2011.task_claims import BY_CONSTRUCTION, CLAIM_TABLE1, check_table1
 from repro.runs.trace import RunFiles
 
 N = 3001  # 30 s at 100 Hz
@@ -90,6 +90,12 @@ def test_fails_on_each_clause(clause: str) -> None:
     df = _trace()
     BREAKS[clause](df)
     res = check_table1(_runs(df))
+    if any(k in clause or clause in k for k in BY_CONSTRUCTION):
+        # issue 18: it holds by construction of the phases: reported failing, not counted
+        bad = [c for c in res.clauses if not c.holds]
+        assert len(bad) == 1 and not bad[0].evidence and res.status == "reproduced", bad
+        assert "by construction: not counted" in bad[0].summary()
+        return
     assert res.status in ("not_reproduced", "partly_reproduced"), (clause, res.measured)
     assert any(not c.holds and clause in c.name for c in res.clauses), res.measured
     failed = res.measured.split("not met:")[1]

@@ -81,6 +81,8 @@ class Clause:
         relative: the margin relative to the threshold means something (a bound on a size);
             False for a count or a numerical tolerance around zero (then no relative margin
             and never ``marginal``: the signed margin says it).
+        evidence: False for a clause that holds by construction of the run (e.g. a phase in
+            which the code sends no command): reported, but not counted for the verdict.
     """
 
     name: str
@@ -90,6 +92,7 @@ class Clause:
     unit: str
     source: str
     relative: bool = True
+    evidence: bool = True
 
     def __post_init__(self) -> None:
         if self.op not in _OPS:
@@ -129,7 +132,8 @@ class Clause:
     def summary(self) -> str:
         """One line: figure, bound, verdict, margin."""
         u = "" if self.unit == "-" else f" {self.unit}"
-        flag = ", MARGINAL" if self.marginal else ""
+        flag = (", MARGINAL" if self.marginal else "") + (
+            "" if self.evidence else ", by construction: not counted")
         return (f"{self.name}: {self.measured:.4g}{u} {self.op} {self.threshold:.4g}{u} "
                 f"({'holds' if self.holds else 'fails'}, margin {self.margin:+.3g}{u}{flag})")
 
@@ -160,10 +164,11 @@ class ClaimResult:
         """The claim is ``reproduced`` when every clause holds, ``partly_reproduced`` when
         some do (``measured`` names those that fail), ``not_reproduced`` when none does."""
         clauses = tuple(clauses)
-        if not clauses:
-            raise ConfigError("a claim needs at least one clause")
-        held = [c for c in clauses if c.holds]
-        failed = [c.name for c in clauses if not c.holds]
+        counted = [c for c in clauses if c.evidence]
+        if not counted:
+            raise ConfigError("a claim needs at least one clause that is evidence")
+        held = [c for c in counted if c.holds]
+        failed = [c.name for c in counted if not c.holds]
         status = ("reproduced" if not failed else
                   "partly_reproduced" if held else "not_reproduced")
         text = measured + (f" -- not met: {'; '.join(failed)}" if failed else "")
