@@ -375,3 +375,27 @@ def test_claim6b_is_claim6_on_the_noisy_run() -> None:
     res = cl.check_6b({"parallel_noisy": _run(df)})
     assert res.status == cl.check_6({"parallel": _run(df)}).status == "reproduced"
     assert "with the 2 mm ToF noise" in res.measured
+
+
+def test_high_frequency_rms_known_solution() -> None:
+    from repro.runs.metrics import high_frequency_rms
+
+    t = np.arange(0.0, 10.0, 1 / 30)
+    x = 0.1 * np.sin(2 * np.pi * 4.0 * t) + 0.5 * np.sin(2 * np.pi * 0.2 * t)
+    assert high_frequency_rms(x, 1 / 30, 2.0) == pytest.approx(0.1 / np.sqrt(2), rel=1e-6)
+    assert high_frequency_rms(0.5 * np.sin(2 * np.pi * 0.2 * t), 1 / 30, 2.0) < 1e-3
+
+
+def test_claim5_uses_a_common_window() -> None:
+    """Issue 18: model (6)'s chatter before model (5)'s first ring-2 contact is outside the
+    common window and does not count (each run's own window, as before, counted it)."""
+    fine, coarse = _base(300), _base(300)
+    _contact(fine, "r2_cbf4", 5.0)
+    _contact(coarse, "r2_cbf4", 1.0)
+    t = coarse["t"].to_numpy()
+    early = (t >= 1.0) & (t < 4.0)
+    for i in range(1, 8):
+        coarse[f"u{i}"] = np.where(early, 0.1 * np.sin(2 * np.pi * 4.0 * t), 0.0)
+        fine[f"u{i}"] = 0.0
+    res = cl.check_5({"case2": _run(fine), "case2_coarse": _run(coarse)})
+    assert _fails(res) and "common window 5.00-" in res.measured

@@ -36,6 +36,22 @@ def high_frequency_fraction(x: np.ndarray, dt: float, cutoff_hz: float) -> float
     return float(spec[freq > cutoff_hz].sum() / total) if total > 0 else 0.0
 
 
+def high_frequency_rms(x: np.ndarray, dt: float, cutoff_hz: float) -> float:
+    """RMS [units of x] of the part of the (mean-removed) signal above ``cutoff_hz`` [Hz]:
+    the amplitude of an oscillation, where :func:`high_frequency_fraction` is its share.
+    Parseval on the one-sided spectrum of the finite samples."""
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    n = x.size
+    if n < 4:
+        return 0.0
+    X = np.fft.rfft(x - x.mean())
+    freq = np.fft.rfftfreq(n, dt)
+    keep = freq > cutoff_hz
+    w = np.where((freq == 0) | ((n % 2 == 0) & (freq == freq[-1])), 1.0, 2.0)
+    return float(np.sqrt(np.sum(w[keep] * np.abs(X[keep]) ** 2)) / n)
+
+
 def first_time_below(t: np.ndarray, x: np.ndarray, level: float) -> float:
     """First time [s] at which ``x <= level`` (NaN if never)."""
     idx = np.flatnonzero(np.asarray(x) <= level)
