@@ -69,7 +69,10 @@ def test_short_run_matches_reference(short_run: Path) -> None:
     (``tests/reference/pomares2011/exp3.tol.json``, ``tests/measure_tolerances.py``).
 
     Measured 2026-12-02 on an AMD EPYC (x86-64, AVX-512) over 6 OpenBLAS kernel families
-    and the hand's initial joints moved by +-1e-12 rad. The kernel family changes nothing
+    and the hand's initial joints moved by +-1e-12 rad (remeasured 2026-12-03 for issue 17
+    items 8-9, the pad layout, the coverage columns and the settled start, on an AMD EPYC
+    without AVX-512, 5 families: 7 contact-driven columns, the distal pads' pmax, finger 3's
+    coverage and p1-p3, are windowed from a row on). The kernel family changes nothing
     (the fingers are commanded in integer motor counts). The 1e-12 move does: the
     pads touch the cylinder from row 3, and the contact points PyBullet keeps (4 per pair)
     change with the last bits, so the pressures move by up to 4.9 kPa (7 quanta), the

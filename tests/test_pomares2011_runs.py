@@ -51,8 +51,11 @@ def test_short_run_matches_reference(tmp_path: Path, name: str) -> None:
     px; tolerance 10x that. The BH8's finger motors, held half open, stick and slip: a
     1e-12 perturbation moves ``motor_qd1`` by 3e-2 rad/s, twice its excursion, from the
     first row, so the 22 hand columns are compared by windowed mean and RMS (themselves
-    moved up to 3e-3 rad/s). A 1 % change of the RVC gain or of omega_max (the indirect
-    gain), a flipped Jacobian row or the torque one step late fail it
+    moved up to 3e-3 rad/s). Remeasured 2026-12-03 (issue 17 items 11-12: the gain rule,
+    the VVS pose columns) on an AMD EPYC without AVX-512, 5 families, with the same
+    perturbations; the hand columns stay windowed. A 1 % change of the RVC gain or of zeta
+    (omega_max is 0, the gain rule; the indirect gain), a flipped Jacobian row or the
+    torque one step late fail it
     (tests/test_reference_tolerances.py)."""
     got = make_reference(tmp_path, name)
     assert_matches_reference(REFERENCES[f"pomares2011/{name}"], got)

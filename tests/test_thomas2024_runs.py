@@ -45,7 +45,9 @@ def test_short_run_matches_reference(name: str, tmp_path: Path) -> None:
     ground-truth distances (collision-library noise, <= 2.9e-7 m in ``dist_right``);
     tolerance 10x the measured, the iteration counts and flags exact. A 1 % change of
     lambda_4p, a flipped Jacobian row or the command one step late fail it by >= 1e5x
-    (tests/test_reference_tolerances.py)."""
+    (tests/test_reference_tolerances.py). case2 remeasured 2026-12-03 (issue 17 item 6, the
+    normal-estimator audit columns) on an AMD EPYC without AVX-512 (5 families; SkylakeX
+    cannot run there): the same perturbations, no column chaotic."""
     out = run(short_config(name), tmp_path / name)
     got = load_run(out)
     assert got.manifest["status"] == "completed"

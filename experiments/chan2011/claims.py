@@ -31,8 +31,6 @@ SLOW_RATIO = 0.8  # ours: "slows near obstacles" = mean speed with DCC bounds < 
 RATE_HZ = 10.0  # chan2011 Sec. V-A5: 10 Hz
 
 
-OURS_CONVERGED = ("ours: 'bring the camera to the desired position' (Sec. III-B) gives no "
-                  "figure; under 5 % of the start error")
 OURS_TOL = "ours: 1e-6 numerical tolerance on a limit"
 
 

@@ -49,11 +49,6 @@ F1Y_TOL_PX = 2.0
 AWAY_M = 0.01
 
 
-def _flag(name: str, ok: bool, source: str) -> Clause:
-    """A yes/no clause (1 = holds): a statement with no figure of its own."""
-    return Clause(name, float(bool(ok)), ">=", 1.0, "-", source, relative=False)
-
-
 #: The paper's words each claim tests (issue 18).
 QUOTES = {
     "1": ('Sec. 7.1: "the label \'1\' indicates the moment when the mini-robot reaches the '
@@ -144,7 +139,7 @@ def check_1(runs: dict[str, RunFiles]) -> ClaimResult:
     return ClaimResult.from_clauses(measured, [
         Clause("mini-robot features reach s* (smallest RMS error)", float(np.nanmin(e_s)), "<",
                REACHED_PX, "px", "ours: 's = s*' has no figure; ~8x the detection error"),
-        _flag("... while the PA-10 still moves", k1 is not None and bool(moving[k1]), src),
+        Clause.flag("... while the PA-10 still moves", k1 is not None and bool(moving[k1]), src),
         Clause("... and stay there while it moves (worst error after reaching s*)",
                stay if k1 is not None else float("nan"), "<=", STAY_PX, "px",
                "ours: the reached bound plus 1 px for the held frames"),

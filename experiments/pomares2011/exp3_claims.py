@@ -46,15 +46,13 @@ READJUST = ("readjust", "readjust_blocked_torque")
 _SOURCES = (
     ("counts flat", f"ours: 'the motor counts stay flat' read as <= {FLAT_FRACTION:g} of a "
                     "trajectory step"),
-    ("slips", f"ours: 'slips' read as > {SLIP_M * 1e3:g} mm off the plan"),
     ("", "paper: Algorithm 1 (Sec. 6), its lines 5-13"),
 )
 
 
 def _verdict(measured: str, checks: dict[str, bool]) -> ClaimResult:
     """Each check a yes/no clause (1 = holds) with its rule's source."""
-    clauses = [Clause(name, float(bool(ok)), ">=", 1.0, "-",
-                      next(src for key, src in _SOURCES if key in name), relative=False)
+    clauses = [Clause.flag(name, ok, next(src for key, src in _SOURCES if key in name))
                for name, ok in checks.items()]
     return ClaimResult.from_clauses(measured, clauses)
 

@@ -23,9 +23,9 @@ def _verdict(measured: str, checks: dict[str, bool]) -> ClaimResult:
     """Each check a yes/no clause (1 = holds); Table 1 is its rule, the figures ours are
     named in the check's text (issue 18)."""
     return ClaimResult.from_clauses(measured, [
-        Clause(name, float(bool(ok)), ">=", 1.0, "-", "paper: Table 1 (Sec. 2)" if not any(
+        Clause.flag(name, ok, "paper: Table 1 (Sec. 2)" if not any(
             ch.isdigit() for ch in name) else "ours: the figure in the clause; Table 1 (Sec. 2)",
-            relative=False, evidence=not any(k in name for k in BY_CONSTRUCTION))
+            evidence=not any(k in name for k in BY_CONSTRUCTION))
         for name, ok in checks.items()])
 
 

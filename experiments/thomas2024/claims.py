@@ -86,12 +86,6 @@ def _fmt_groups(groups: list[tuple[float, list[int]]]) -> str:
     return "; ".join(f"{{{','.join(map(str, g))}}} at {t:.2f} s" for t, g in groups) or "none"
 
 
-def _flag(name: str, ok: bool, source: str) -> Clause:
-    """A yes/no clause (1 = holds) for a statement with no figure of its own (an order, a
-    match); its margin says nothing."""
-    return Clause(name, float(bool(ok)), ">=", 1.0, "-", source, relative=False)
-
-
 OURS_CONV = ("ours: 'converges' (Sec. V-A) has no figure; under 2 % of the start "
              "(~ the detection noise)")
 
@@ -186,9 +180,8 @@ def _nearest_obstacle(df: pd.DataFrame, t: float) -> str:
     return min(dcols, key=lambda c: df[c].iloc[i])[5:] if dcols else "?"
 
 
-def _timed(label: str, t: float, paper: float) -> tuple[str, bool]:
-    return (f"{label} at {t:.2f} s (paper ~{paper:g} s)",
-            bool(np.isfinite(t)) and abs(t - paper) <= TIME_TOL_S)
+def _timed(label: str, t: float, paper: float) -> str:
+    return f"{label} at {t:.2f} s (paper ~{paper:g} s)"
 
 
 def check_3(runs: dict[str, RunFiles]) -> ClaimResult:
@@ -208,9 +201,9 @@ def check_3(runs: dict[str, RunFiles]) -> ClaimResult:
     t2b = other[0][0] if other else np.nan
     obstacle = _nearest_obstacle(df, t2a) if g2 else "none"
     order = bool(g2 and g1 and other) and t2a < t1 <= t2b + 1e-9
-    txt_a, _ = _timed("ring 2 first", t2a, PAPER_T_RING2_FIRST)
-    txt_1, _ = _timed("ring 1", t1, PAPER_T_RING1)
-    txt_b, _ = _timed("ring 2 other side", t2b, PAPER_T_RING2_OTHER)
+    txt_a = _timed("ring 2 first", t2a, PAPER_T_RING2_FIRST)
+    txt_1 = _timed("ring 1", t1, PAPER_T_RING1)
+    txt_b = _timed("ring 2 other side", t2b, PAPER_T_RING2_OTHER)
     src = "paper: Sec. V-A (Fig. 7)"
     return ClaimResult.from_clauses(
         f"near contact (CBF <= {NEAR_CONTACT * 100:g} cm) first: {txt_a}, {txt_1}, {txt_b}; "
@@ -218,8 +211,8 @@ def check_3(runs: dict[str, RunFiles]) -> ClaimResult:
         f"{_fmt_groups(g1)} (our sensor numbers; the paper's are {{2,3,4,5}}, {{16,17}}, "
         f"{{12,13}}); CBF at the end: ring 1 {end1 * 100:.1f} cm, ring 2 {end2 * 100:.1f} cm; "
         f"||e_4p|| {e0:.0f} -> {e[-1]:.1f} px",
-        [_flag("order ring 2, ring 1, ring 2 (other side)", order, src),
-         _flag("ring 2 first meets the right obstacle", obstacle == "right",
+        [Clause.flag("order ring 2, ring 1, ring 2 (other side)", order, src),
+         Clause.flag("ring 2 first meets the right obstacle", obstacle == "right",
                "paper: 'encounters the obstacle on the right' (Sec. V-A)"),
          Clause("ring 2 first near contact, time off the paper's ~2.5 s",
                 abs(t2a - PAPER_T_RING2_FIRST), "<=", TIME_TOL_S, "s",
@@ -266,14 +259,14 @@ def check_4(runs: dict[str, RunFiles]) -> ClaimResult:
         f"number; the paper's is 9), ring-1 near contact first: {_fmt_groups(g1)}; "
         f"max |u| over the last {END_WINDOW_S:g} s {u_end:.4f} rad/s ({u_end / u_peak:.1%} of "
         f"its peak; {u_abs[-1]:.4f} on the last row)",
-        [_flag("stopped by the Lagrangian test", stopped, "paper: 'stopped when the norm of "
+        [Clause.flag("stopped by the Lagrangian test", stopped, "paper: 'stopped when the norm of "
                "gradient of Lagrangian ... falls below ... 0.01' (Sec. V-B)"),
          Clause("local (not global) minimum (final ||e_4p||)", e_end, ">", RETURN_PX, "px",
                 "ours: above the 3 px 'returns to ~0' of claim 7"),
-         _flag(f"ring-2 sensors {CASE2_V_SENSORS} (facing the V) in virtual contact at the end",
+         Clause.flag(f"ring-2 sensors {CASE2_V_SENSORS} (facing the V) in virtual contact at the end",
                set(CASE2_V_SENSORS) <= set(contact_end), "paper: 'sensors {4, 12} on ring 2 "
                "being in virtual contact' (Sec. V-B); our numbering"),
-         _flag(">= 2 ring-2 multipliers > 0, all on sensors in contact", len(active) >= 2
+         Clause.flag(">= 2 ring-2 multipliers > 0, all on sensors in contact", len(active) >= 2
                and set(active) <= set(contact_end), "paper: strict complementarity, kappa_k > 0 "
                "(Sec. VI)"),
          Clause("a ring-1 sensor near contact at the end (its final CBF)", cbf1_end, "<=",
@@ -420,7 +413,7 @@ def check_7(runs: dict[str, RunFiles]) -> ClaimResult:
         f"ring 2 {fmt(cbf_min[2], 100)} cm, ring 1 {fmt(cbf_min[1], 100)} cm; "
         f"min true distance {dmin * 100:.1f} cm"
         + (f"; approaches outside the paper's windows: {', '.join(outside)}" if outside else ""),
-        [_flag("4 approaches of ring 2 in 5-18 s and 4 of ring 1 in 20-30 s",
+        [Clause.flag("4 approaches of ring 2 in 5-18 s and 4 of ring 1 in 20-30 s",
                len(rises[2]) == 4 and len(rises[1]) == 4 and not outside,
                "paper: 'the four instances in the interval between 5 s to 18 s ... from "
                "approximately 20 s to 30 s ... four instances' (Sec. V-C)"),

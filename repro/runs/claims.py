@@ -103,6 +103,13 @@ class Clause:
         object.__setattr__(self, "measured", float(self.measured))
         object.__setattr__(self, "threshold", float(self.threshold))
 
+    @classmethod
+    def flag(cls, name: str, ok: bool, source: str, evidence: bool = True) -> Clause:
+        """A yes/no clause (1 = holds) for a statement with no figure of its own (an order,
+        an event, a match); its margin says nothing."""
+        return cls(name, float(bool(ok)), ">=", 1.0, "-", source, relative=False,
+                   evidence=evidence)
+
     @property
     def holds(self) -> bool:
         """True when ``measured op threshold`` (False for a NaN figure; an infinite one
