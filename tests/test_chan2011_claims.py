@@ -190,6 +190,19 @@ def test_claim2(run: str, breaks: str, clause: str) -> None:
     assert ("position" in clause) == ("position limits" in failed)
 
 
+@pytest.mark.parametrize("excess, holds", [(5e-4, True), (2e-3, False)])
+def test_claim2_measured_speed_tolerance_is_a_fraction_of_the_limit(excess: float,
+                                                                    holds: bool) -> None:
+    """Issue 18: the tracked (measured) speed may exceed the limit by 0.1 % of it (the inner
+    loop's tracking error); the command may not."""
+    bad = _riding()
+    bad.loc[150, "qd4"] = (1.0 + excess) * QD_MAX[3]
+    res = cl.check_2({"simulation": _run(bad), "experiment": _experiment(_riding())})
+    clause = next(c for c in res.clauses if c.name.startswith("simulation: measured"))
+    assert clause.measured == pytest.approx(excess, rel=1e-9) and clause.holds == holds
+    assert cl.MEASURED_SPEED_TOL == 1e-3
+
+
 # ------------------------------------------------------------------ claim 3
 @pytest.mark.parametrize("breaks", ["outside", "nan_without_event", "reported_lost"])
 def test_claim3(breaks: str) -> None:

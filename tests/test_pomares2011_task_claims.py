@@ -15,13 +15,14 @@ from repro.runs.trace import RunFiles
 
 N = 3001  # 30 s at 100 Hz
 T = np.arange(N) * 0.01
-T_SWITCH, T_TRAJ, T_STOP = 15.0, 19.0, 24.0
+T_SWITCH, T_SUPPORT, T_TRAJ, T_STOP = 15.0, 17.0, 19.0, 24.0
 
 
 def _trace() -> pd.DataFrame:
     man = T >= T_SWITCH
-    phase = np.where(~man, "waiting", np.where(T < T_TRAJ, "closing",
-                                               np.where(T < T_STOP, "manipulation", "stopped")))
+    phase = np.where(~man, "waiting", np.where(
+        T < T_SUPPORT, "closing", np.where(T < T_TRAJ, "support", np.where(
+            T < T_STOP, "manipulation", "stopped"))))
     data: dict[str, object] = {
         "t": T, "task_phase": np.where(man, "manipulation", "approach"), "phase": phase,
         "e_u_px": 281.0 * np.exp(-0.3 * T), "e_s_px": 90.0 * np.exp(-0.5 * T) + 0.3,
@@ -30,7 +31,11 @@ def _trace() -> pd.DataFrame:
         "obj_dy": np.where(T >= T_TRAJ, -0.001, np.nan), "obj_dz": np.where(T >= T_TRAJ, 0.0,
                                                                             np.nan),
         "plan_dy": np.where(T >= T_TRAJ, -0.001, np.nan),
+        "obj_x": np.zeros(N), "obj_y": np.zeros(N), "obj_z": np.full(N, 0.05),
+        "contact_palm": np.zeros(N, bool),
     }
+    for k in range(1, 4):
+        data[f"contact{k}"] = T >= T_SWITCH + 1.0
     for i in range(1, 4):
         data[f"motor_q{i}"] = np.where(man, 130.9 + (T - T_SWITCH), 130.9)
     for i in range(1, 7):
@@ -100,6 +105,24 @@ def test_fails_on_each_clause(clause: str) -> None:
     assert any(not c.holds and clause in c.name for c in res.clauses), res.measured
     failed = res.measured.split("not met:")[1]
     assert clause in failed and failed.count(";") == 0, failed  # only that clause
+
+
+def test_a_drop_while_the_support_is_lowered_fails() -> None:
+    """Issue 18: the audit's ``dropped`` needs the manipulation's reference pose, so a drop
+    while the support is lowered was ignored; the check now follows the object in the palm
+    frame from the start of the lowering."""
+    df = _trace()
+    lowering = (T >= T_SUPPORT) & (T < T_TRAJ)
+    for k in range(1, 4):
+        df.loc[lowering & (T > 18.0), f"contact{k}"] = False
+    df.loc[lowering, "obj_z"] = 0.05 - 0.01 * (T[lowering] - T_SUPPORT)
+    res = check_table1(_runs(df))
+    assert res.status == "partly_reproduced", res.measured
+    assert [c.name for c in res.clauses if not c.holds] == [
+        "manipulation: the object is not dropped before the end of the hand's task"]
+    assert "(lost there)" in res.measured
+    df.loc[lowering, [f"contact{k}" for k in range(1, 4)]] = True  # held: it moved in the hand
+    assert check_table1(_runs(df)).status == "reproduced"
 
 
 def test_fails_when_the_approach_or_the_hand_task_never_ends() -> None:

@@ -27,6 +27,13 @@ RIDE_FRACTION = 0.95  # ours: "rides just under its limit" = measured |qd| >= 95
 RIDE_MIN_JOINTS = 2  # ours: "velocities ride" = at least two joints ...
 RIDE_MIN_S = 0.5  # ours: ... each for at least 0.5 s in total (more than a start-up transient)
 LIMIT_TOL = 1e-6  # [rad, rad/s] numerical tolerance on limits
+#: Measured (not commanded) joint speeds may exceed their limit by this fraction of it. ours
+#: (issue 18): the NMPC constrains the *command* (Sec. II-C-1); the measured speed adds the
+#: inner loop's tracking error (a 1 kHz PD following the quintic reference, as the robot's
+#: own servo does), which no constraint on the command removes. 0.1 % of the limit: a tenth
+#: of what Fig. 6, the paper's evidence for the claim, can show (its speeds and dotted limit
+#: lines are drawn ~1 % of the axis apart at best).
+MEASURED_SPEED_TOL = 1e-3
 SLOW_RATIO = 0.8  # ours: "slows near obstacles" = mean speed with DCC bounds < 80 % of without
 RATE_HZ = 10.0  # chan2011 Sec. V-A5: 10 Hz
 
@@ -183,8 +190,10 @@ def check_2(runs: dict[str, RunFiles]) -> ClaimResult:
             Clause(f"{name}: commanded velocities within their limits (largest excess)",
                    float(np.max(np.abs(u) - qd_max)), "<=", LIMIT_TOL, "rad/s", OURS_TOL,
                    relative=False),
-            Clause(f"{name}: measured velocities within their limits (largest excess)",
-                   float(np.max(np.abs(qd) - qd_max)), "<=", LIMIT_TOL, "rad/s", OURS_TOL,
+            Clause(f"{name}: measured velocities within their limits (largest excess over "
+                   f"the limit, as a fraction of it)", float(np.max(np.abs(qd) / qd_max - 1.0)),
+                   "<=", MEASURED_SPEED_TOL, "-", "ours: 0.1 % of the limit for the inner "
+                   "loop's tracking error (the NMPC constrains the command, Sec. II-C-1)",
                    relative=False),
             Clause(f"{name}: velocities ride just under their limits (joints at >= "
                    f"{RIDE_FRACTION:.0%} for >= {RIDE_MIN_S:g} s: {riders})", len(riders),

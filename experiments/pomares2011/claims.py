@@ -29,9 +29,10 @@ REACHED_U_PX = 2.0
 #: "the base is still": every PA-10 joint's measured speed under this [rad/s]. ours: 3e-4 of
 #: the RVC's peak joint speed (0.3 rad/s).
 BASE_STILL_RAD_S = 1e-4
-#: "V non-increasing": no rise between two trace rows larger than this fraction of V at
-#: the start of the still window. ours: the features are held between 200 fps frames and a
-#: new frame moves them by the detection noise, a step in the image potential.
+#: "V non-increasing": no rise of V_true (exact projections) between two trace rows larger
+#: than this fraction of V at the start of the still window. ours: the law runs at 1 kHz on
+#: features held for 5 ms between 200 fps frames, so the continuous-time (15) holds only up
+#: to the discretisation; 1e-3 V leaves that room and catches any real rise.
 V_RISE_REL = 1e-3
 #: The still window must last at least this long to judge claim 2 [s]. ours: 100 trace rows.
 MIN_WINDOW_S = 1.0
@@ -39,6 +40,9 @@ MIN_WINDOW_S = 1.0
 #: error under POSE_TOL_M. ours: ~the detection error; 2 mm at 0.2-0.4 m depth.
 VVS_RESIDUAL_PX = 0.5
 POSE_TOL_M = 2e-3
+#: A cold start "ends at the warm start's pose" within this [m] (reported for the larger
+#: offsets). ours: 1 mm, ~5x the warm start's own distance to the truth.
+SAME_POSE_M = 1e-3
 #: "f1y stays at 272 px" while the human is within dmin: |f2y - 272| under this [px] (the
 #: held coordinate is f2y, scene.PRIMARY_TASK_ROW). ours:
 #: as REACHED_PX.
@@ -151,36 +155,54 @@ def check_1(runs: dict[str, RunFiles]) -> ClaimResult:
                "ours: as s = s*; the claim is about the RVC's extracted features (Fig. 7)")])
 
 
+def _rises(V: np.ndarray) -> tuple[float, int]:
+    """(largest rise between consecutive rows [J], number of rising intervals)."""
+    d = np.diff(V)
+    return (float(np.max(d)) if d.size else 0.0), int(np.sum(d > 0))
+
+
 def check_2(runs: dict[str, RunFiles]) -> ClaimResult:
+    """Eq. (15) on the still-base window. Issue 18: eq. (15) is a statement about the control
+    law with exact features; the run's camera is noisy (every trace row is a new frame, whose
+    detection noise steps the image potential). The check reports V from the detected points
+    (column V) and from the exact projections through the true camera pose (V_true, same qd,
+    M, k_P), and judges on V_true."""
     run = runs["exp1"]
     df = run.trace
     t = df["t"].to_numpy(float)
     V = df["V"].to_numpy(float)
+    has_true = "V_true" in df.columns
+    Vt = df["V_true"].to_numpy(float) if has_true else np.full(len(df), np.nan)
     still = (_arm_speed(run) < BASE_STILL_RAD_S) & np.isfinite(V)
     moving = np.flatnonzero(~still)  # the base is still from the row after its last motion
     k0 = (int(moving[-1]) + 1 if moving.size else 0) if still[-1] else None
     if k0 is None or k0 >= len(t) - 1:
         return ClaimResult(f"the PA-10 is never still (max joint speed < {BASE_STILL_RAD_S:g} "
                            f"rad/s) in {t[-1]:.1f} s: claim 2 not testable", "not_reproduced")
-    Vw = V[k0:]
-    rises = np.diff(Vw)
     window = float(t[-1] - t[k0])
-    worst = float(np.max(rises)) if rises.size else 0.0
-    n_up = int(np.sum(rises > 0))
-    measured = (f"PA-10 still from {t[k0]:.2f} s ({window:.1f} s window): V {Vw[0]:.3g} -> "
-                f"{Vw[-1]:.3g} J; largest rise between rows {worst:.3g} J "
-                f"({worst / Vw[0]:.2e} of V at the start), {n_up} of {rises.size} row "
-                f"intervals rise (every row holds a new camera frame); before that, with the "
-                f"base moving, V rises in "
-                f"{int(np.sum(np.diff(V[:k0][np.isfinite(V[:k0])]) > 0))} of {k0 - 1} intervals")
+    worst, n_up = _rises(V[k0:])
+    worst_t, n_up_t = _rises(Vt[k0:])
+    n = len(t) - 1 - k0
+    measured = (f"PA-10 still from {t[k0]:.2f} s ({window:.1f} s window): with the exact "
+                f"projections (V_true, the claim's) V {Vt[k0]:.3g} -> {Vt[-1]:.3g} J, largest "
+                f"rise between rows {worst_t:.3g} J ({worst_t / Vt[k0]:.2e} of V at the start), "
+                f"{n_up_t} of {n} row intervals rise; from the detected points (V, every row a "
+                f"new noisy frame) {V[k0]:.3g} -> {V[-1]:.3g} J, largest rise {worst:.3g} J "
+                f"({worst / V[k0]:.2e}), {n_up} of {n} intervals rise; before that, with the "
+                f"base moving, V_true rises in "
+                f"{int(np.sum(np.diff(Vt[:k0][np.isfinite(Vt[:k0])]) > 0))} of {k0 - 1} "
+                f"intervals")
     if window < MIN_WINDOW_S:  # a precondition, not a clause of the claim
         return ClaimResult(measured + f" -- not testable: the base is still for only "
                            f"{window:.2f} s (< {MIN_WINDOW_S:g} s, ours: 100 trace rows)",
                            "not_reproduced")
     return ClaimResult.from_clauses(measured, [
-        Clause("V non-increasing once the base is still (largest rise over V at its start)",
-               worst / Vw[0], "<=", V_RISE_REL, "-", "paper: eq. (15), dV/dt <= 0; ours: "
-               "1e-3 V for a new frame's detection noise", relative=False)])
+        Clause("V non-increasing once the base is still, with exact features (largest rise "
+               "of V_true over its value at the start)",
+               worst_t / Vt[k0] if has_true else float("nan"), "<=", V_RISE_REL, "-",
+               "paper: eq. (15), dV/dt <= 0 (a statement about the law, exact features); "
+               "ours: 1e-3 V for the 1 kHz integration and the 5 ms held frames",
+               relative=False)])
 
 
 def check_3(runs: dict[str, RunFiles]) -> ClaimResult:
@@ -202,6 +224,32 @@ def check_3(runs: dict[str, RunFiles]) -> ClaimResult:
                    "error"),
             Clause(f"{name}: the pose converges to the true pose (final position error)",
                    float(err[-1]), "<", POSE_TOL_M, "m", "ours: 2 mm at 0.2-0.4 m depth")]
+    cold = runs.get("vvs_cold")
+    if cold is None:
+        clauses.append(Clause("a cold start (>= 2 cm / 10 deg off) converges (vvs_cold run)",
+                              float("nan"), "<", VVS_RESIDUAL_PX, "px", "ours: issue 18"))
+    else:
+        df = cold.trace
+        off_m, off_deg = df["offset_m"].to_numpy(float), df["offset_deg"].to_numpy(float)
+        case = (off_m == off_m.min()) & (off_deg == off_deg[off_m == off_m.min()].min())
+        c = df[case]
+        lo_m, lo_deg = float(off_m[case][0]), float(off_deg[case][0])
+        rep = []
+        for (m, d), g in df.groupby(["offset_m", "offset_deg"]):
+            same = g["to_warm_m"].to_numpy(float) < SAME_POSE_M
+            rep.append(f"{m * 100:g} cm / {d:g} deg: {same.mean():.0%} of {len(g)} end at the "
+                       f"warm start's pose (worst residual {g['residual_px'].max():.2f} px, "
+                       f"position error {g['pos_err_m'].max() * 1e3:.1f} mm)")
+        parts.append(f"cold starts on {df['frame'].nunique()} rendered frames along the "
+                     f"approach (vvs_cold): " + "; ".join(rep))
+        clauses += [
+            Clause(f"cold start ({lo_m * 100:g} cm / {lo_deg:g} deg off): e_v -> 0 (worst final "
+                   f"residual of {len(c)} starts)", float(c["residual_px"].max()), "<",
+                   VVS_RESIDUAL_PX, "px", "ours: as the warm case; the start from issue 18 "
+                   "(a part placed by hand)"),
+            Clause(f"cold start ({lo_m * 100:g} cm / {lo_deg:g} deg off): the pose converges to "
+                   "the true pose (worst final position error)", float(c["pos_err_m"].max()),
+                   "<", POSE_TOL_M, "m", "ours: as the warm case")]
     return ClaimResult.from_clauses("; ".join(parts), clauses)
 
 
@@ -264,12 +312,14 @@ CLAIMS_1_4: tuple[Claim, ...] = (
           whole_run=("exp1",),
           quote=QUOTES["1"]),
     Claim(PAPER, "2", "Exp 1: with no human, V (10) is non-increasing once the base is still "
-          "(eq. 15)", f"no rise of V > {V_RISE_REL:g} V once the PA-10 is still",
+          "(eq. 15)", f"no rise of V > {V_RISE_REL:g} V once the PA-10 is still (V from the "
+          "exact projections; the detected points' V reported)",
           ("exp1",), check_2, whole_run=("exp1",),
           quote=QUOTES["2"]),
     Claim(PAPER, "3", "The VVS pose estimate converges to the true object pose (e_v -> 0)",
-          f"final residual < {VVS_RESIDUAL_PX:g} px, pose error < {POSE_TOL_M * 1e3:g} mm",
-          ("exp1", "exp2"), check_3,
+          f"final residual < {VVS_RESIDUAL_PX:g} px, pose error < {POSE_TOL_M * 1e3:g} mm, in "
+          f"the runs (warm-started) and from cold starts 2 cm / 10 deg off",
+          ("exp1", "exp2", "vvs_cold"), check_3,
           quote=QUOTES["3"]),
     Claim(PAPER, "4", "Exp 2: when the human comes within dmin, e2 moves the mini-robot away; "
           "dist > 0 always; f1y stays at 272 px; after the human leaves, s -> s*",

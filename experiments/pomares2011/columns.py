@@ -38,6 +38,10 @@ def declare_columns(human: bool = False) -> Columns:
              "mini-robot: qd its joint velocities, M its block of the chain's joint-space "
              "inertia (pinocchio CRBA of the run's URDF at the measured q), e_s = s* - s over "
              "the rows in use [px], k_P of the gain_rule event")
+    cols.add("V_true", "J", "audit: V (10) with e_s from the exact projections of the dots' "
+             "model points through the true camera pose at this step (the s<i>_u_true, "
+             "s<i>_v_true of a frame row) instead of the detected points; same qd, M, k_P and "
+             "rows", audit=True)
     cols.add("e2", "-", "secondary task (17), alpha (1 - dist/dmin) when dist < dmin, else 0")
     cols.add("secondary_active", "bool", "the human is within dmin: primary task reduced")
     for a in "xyz":

@@ -30,6 +30,7 @@ from repro.control.indirect_vs import (
 )
 from repro.control.rvc import rvc_features, rvc_joint_velocity
 from repro.geometry import inv_T
+from repro.sensors.camera import project_points
 from repro.sim.episode import Observation, StepResult
 from repro.sim.human import add_tracking_noise
 from repro.sim.pa10 import ALL_JOINTS, HAND_JOINTS
@@ -82,6 +83,8 @@ class Pomares2011Controller:
         self.was_active = False
         self.held_human: tuple[HumanDistance, dict[str, float | str]] | None = None
         self._L_memo: tuple[bytes, np.ndarray] | None = None
+        #: audit: the dots' model points in the world (the part is fixed) [m], for V_true
+        self._P_world = sc.POINTS_P @ sc.OBJECT.T_world[:3, :3].T + sc.OBJECT.T_world[:3, 3]
 
     def _interaction(self, uv: np.ndarray, T_mc_obj: np.ndarray) -> np.ndarray:
         """L_px at the detected points with the depths of the VVS pose; between frames both
@@ -258,6 +261,13 @@ class Pomares2011Controller:
                                         J_g, G, M)
             diag = {"V": lyapunov(obs.qd["mini"], M, self.s_star.ravel() - f.uv.ravel(),
                                   self.hybrid.config.k_P), "e2": 0.0, "active": False}
+        # audit (issue 18): V (10) with the exact projections through the true camera pose
+        # in place of the detected points (eq. (15) is about the law with exact features)
+        uv_true, _ = project_points(sc.INTRINSICS, self.chain.frame_pose(
+            "mini_camera_optical", q), self._P_world)
+        rows = diag.get("rows", list(range(self.s_star.size)))
+        e_true = (self.s_star.ravel() - uv_true.ravel())[rows]
+        V_true = lyapunov(obs.qd["mini"], M, e_true, self.hybrid.config.k_P)
         active = bool(diag["active"])
         if active != self.was_active and hd is not None:
             events.append(("secondary_task_on" if active else "secondary_task_off",
@@ -267,7 +277,7 @@ class Pomares2011Controller:
         e_y = float(f.uv.ravel()[sc.PRIMARY_TASK_ROW] - sc.PRIMARY_TASK_TARGET_PX)
         flange = self.chain.frame_pose("pa10_flange", q)[:3, 3]
         cols: dict[str, float | int | str | bool] = dict(self.rvc_cols)
-        cols.update(V=diag["V"], e_s_px=float(np.sqrt(np.mean(np.sum(
+        cols.update(V=diag["V"], V_true=V_true, e_s_px=float(np.sqrt(np.mean(np.sum(
             (f.uv - self.s_star) ** 2, axis=1)))), e_f2y_px=e_y, e2=diag["e2"],
             secondary_active=active, flange_x=flange[0], flange_y=flange[1],
             flange_z=flange[2], **cols_h)

@@ -20,16 +20,20 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from experiments.pomares2011.exp3_config import DROP_M
 from repro.runs.claims import Claim, ClaimResult, Clause
 from repro.runs.trace import RunFiles
 
 PAPER = "pomares2011"
 FINGERS = (1, 2, 3)
 
-#: "Motor counts stay flat during readjustments" (the horizontal lines of Fig. 12a): over the
-#: 33 ms after a readjustment tick, the readjusted finger's measured counts change by at most
-#: this fraction of its median change over a trajectory step. ours: half a step; the paper's
-#: figure shows readjustments as horizontal against the slopes of the trajectory.
+#: "Motor counts stay flat during readjustments" (the horizontal lines of Fig. 12a; Sec. 6: "a
+#: readjustment of the finger where its position does not change (since the finger is blocked
+#: by the surface of the object)"): over the 33 ms after a readjustment tick the readjusted
+#: finger's measured counts change by at most this fraction of the commanded increment
+#: (median over its readjustments; the largest over the fingers). ours: a finger that
+#: advances less than half of its increment is more blocked than free. Issue 18: was half of
+#: a *trajectory* step, which a free finger meets whenever the increment is small.
 FLAT_FRACTION = 0.5
 #: The object "slips" when its centre leaves the planned path (the plan's translation from the
 #: grasp pose, in the palm frame) by more than this [m]. ours: 3 mm, ~4 % of the cylinder's
@@ -42,19 +46,12 @@ P_TOL_KPA = 1e-6
 READJUST = ("readjust", "readjust_blocked_torque")
 
 
-#: Where each yes/no clause's rule comes from (first matching key), issue 18.
-_SOURCES = (
-    ("counts flat", f"ours: 'the motor counts stay flat' read as <= {FLAT_FRACTION:g} of a "
-                    "trajectory step"),
-    ("", "paper: Algorithm 1 (Sec. 6), its lines 5-13"),
-)
+SRC_ALG = "paper: Algorithm 1 (Sec. 6), its lines 5-13"
 
 
-def _verdict(measured: str, checks: dict[str, bool]) -> ClaimResult:
-    """Each check a yes/no clause (1 = holds) with its rule's source."""
-    clauses = [Clause.flag(name, ok, next(src for key, src in _SOURCES if key in name))
-               for name, ok in checks.items()]
-    return ClaimResult.from_clauses(measured, clauses)
+def _count(name: str, n: int, source: str = SRC_ALG) -> Clause:
+    """A clause on a count of offending ticks (0 holds)."""
+    return Clause(name, n, "<=", 0, "-", source, relative=False)
 
 
 def _bool(s: pd.Series) -> np.ndarray:
@@ -99,8 +96,8 @@ def _task_rows(df: pd.DataFrame) -> tuple[np.ndarray, int | None]:
     return rows, (int(ended[0]) if ended.size else None)
 
 
-def _decisions(df: pd.DataFrame, thr: np.ndarray, n_max: int) -> tuple[dict[str, bool], str]:
-    """Clause 1: each tick's per-finger decision against the trace's p."""
+def _decisions(df: pd.DataFrame, thr: np.ndarray, n_max: int) -> tuple[list[Clause], str]:
+    """Each tick's per-finger decision against the trace's p: one count per clause."""
     ticks = np.flatnonzero(_bool(df["tick"]))
     n = {"readjust": 0, "ok": 0, "give_up": 0, "stop": 0}
     bad_readjust, bad_ok, bad_give, bad_p = [], [], [], []
@@ -138,21 +135,27 @@ def _decisions(df: pd.DataFrame, thr: np.ndarray, n_max: int) -> tuple[dict[str,
     if bad_readjust or bad_ok:
         first = (bad_readjust + bad_ok)[0]
         text += f" (first: finger {first[0]} at {first[1]:.3f} s, p = {first[2]:.1f} kPa)"
-    return {
-        "readjustments happen": n["readjust"] > 0,
-        "readjustments only when p < readjustThres (and numReadjust < max)":
-            not bad_readjust,
-        "every check with p < readjustThres readjusts (or gives up after max)":
-            not bad_ok and not bad_give,
-        "the p Algorithm 1 used is the logged pads' maximum": not bad_p,
-    }, text
+    return [
+        Clause("readjustments happen (readjustment decisions)", n["readjust"], ">=", 1, "-",
+               SRC_ALG, relative=False),
+        _count("readjustments only when p < readjustThres and numReadjust < max (readjustments "
+               "that break it)", len(bad_readjust)),
+        _count("every check with p < readjustThres readjusts, or gives up after max (checks "
+               "that break it)", len(bad_ok) + len(bad_give)),
+        _count("the p Algorithm 1 used is the logged pads' maximum (decisions whose p differs)",
+               len(bad_p), "ours: audit that the trace's p is the controller's (float "
+               f"formatting, {P_TOL_KPA:g} kPa)"),
+    ], text
 
 
-def _flat(df: pd.DataFrame, increment: float) -> tuple[dict[str, bool], str]:
-    """Clause 2: counts over the 33 ms after a readjustment tick vs after a trajectory step."""
+def _flat(df: pd.DataFrame, increment: float) -> tuple[list[Clause], str]:
+    """The readjusted finger's measured counts over the 33 ms after a readjustment tick, as
+    a fraction of the commanded increment (Sec. 6: its position does not change)."""
+    name = ("counts flat during readjustments (the readjusted finger's measured change over "
+            "the commanded increment, median per finger, the largest)")
+    src = (f"ours: 'its position does not change (since the finger is blocked)' (Sec. 6) read "
+           f"as advancing < {FLAT_FRACTION:g} of the increment")
     ticks = np.flatnonzero(_bool(df["tick"]))
-    if ticks.size < 2:
-        return {"counts flat during readjustments (no ticks)": False}, "no ticks"
     action = _text(df["tactile_action"])
     step = df["tactile_step"].to_numpy(float)
     counts = np.column_stack([df[f"counts{k}"].to_numpy(float) for k in FINGERS])
@@ -161,7 +164,7 @@ def _flat(df: pd.DataFrame, increment: float) -> tuple[dict[str, bool], str]:
     d_meas = counts[nxt] - counts[here]
     d_cmd = cmd[here] - cmd[np.maximum(here - 1, 0)]
     moves = (action[here] == "move") & (step[here] >= 1)
-    ok, parts, ratios = True, [], []
+    parts, fractions = [], []
     for f, k in enumerate(FINGERS):
         dec = _text(df[f"alg_decision{k}"])[here]
         adj = (dec == "readjust") & (action[here] == "readjust")
@@ -172,80 +175,104 @@ def _flat(df: pd.DataFrame, increment: float) -> tuple[dict[str, bool], str]:
         adj_med = float(np.median(np.abs(d_meas[adj, f])))
         others = [g for g in range(len(FINGERS)) if g != f]
         still = float(np.max(np.abs(d_meas[np.ix_(adj, others)])))
-        ratios.append(float(np.median(d_meas[adj, f])) / increment)
-        flat = bool(np.isfinite(move_med) and adj_med <= FLAT_FRACTION * move_med)
-        ok &= flat
-        parts.append(f"finger {k}: {adj_med:.0f} counts per readjustment vs {move_med:.0f} per "
-                     f"trajectory step ({int(adj.sum())} readjustments; other fingers within "
-                     f"{still:.0f} counts)")
-    if not parts:
-        return {"counts flat during readjustments (no readjustment tick)": False}, \
+        fractions.append(adj_med / increment)
+        parts.append(f"finger {k}: {adj_med:.0f} counts per readjustment ({adj_med / increment:.2f}"
+                     f" of the {increment:.0f}-count increment) vs {move_med:.0f} per trajectory "
+                     f"step ({int(adj.sum())} readjustments; other fingers within {still:.0f} "
+                     f"counts)")
+    if not parts:  # nothing to judge: NaN fails
+        return [Clause(name, float("nan"), "<=", FLAT_FRACTION, "-", src)], \
             "no readjustment tick"
-    text = ("; ".join(parts) + f"; the readjusted finger moved {np.median(ratios):.2f} of the "
-            f"commanded {increment:.0f}-count increment (not blocked: it compresses the skin)")
-    return {f"counts flat during readjustments (<= {FLAT_FRACTION:g} of a trajectory step)":
-            ok}, text
+    return [Clause(name, max(fractions), "<=", FLAT_FRACTION, "-", src)], "; ".join(parts)
 
 
 def _stop(df: pd.DataFrame, safety: np.ndarray, n_max: int
-          ) -> tuple[dict[str, bool], str, int | None]:
-    """Clause 3: the stop of line 13, where and why; nothing sent after it."""
+          ) -> tuple[list[Clause], str, int | None]:
+    """The stop of line 13: only on line 12's condition, at the first tick meeting it, and
+    nothing sent after it. One count per clause, the same clauses with or without a stop."""
     ticks = np.flatnonzero(_bool(df["tick"]))
-    stop_rows = [int(r) for r in ticks
-                 if any(_text(df[f"alg_decision{k}"])[r] == "stop" for k in FINGERS)]
-    # a tick where some finger is under safety with numReadjust == max (line 12's condition)
-    cond_rows = []
-    for r in ticks:
-        for k in FINGERS:
-            dec = _text(df[f"alg_decision{k}"])[r]
-            p = finger_pressure(df, k)[r]
-            if dec in ("give_up_continue", "stop") and p < safety[k - 1] and \
-                    float(df[f"alg_num_readjust{k}"].iat[r]) == n_max:
-                cond_rows.append(int(r))
-    give_ups = [float(finger_pressure(df, k)[r]) for r in ticks for k in FINGERS
-                if _text(df[f"alg_decision{k}"])[r] == "give_up_continue"]
-    if not stop_rows:
+    decisions = {k: _text(df[f"alg_decision{k}"]) for k in FINGERS}
+    pressure = {k: finger_pressure(df, k) for k in FINGERS}
+    num = {k: df[f"alg_num_readjust{k}"].to_numpy(float) for k in FINGERS}
+    stop_rows = [int(r) for r in ticks if any(decisions[k][r] == "stop" for k in FINGERS)]
+    row = stop_rows[0] if stop_rows else None
+    # line 12's condition: a finger's check after max readjustments with p < safetyThres
+    cond = [(int(r), k) for r in ticks for k in FINGERS
+            if decisions[k][r] in ("give_up_continue", "stop") and num[k][r] == n_max
+            and pressure[k][r] < safety[k - 1]]
+    missed = [(r, k) for r, k in cond if (row is None or r <= row)
+              and decisions[k][r] != "stop"]
+    wrong = [(r, k) for r in stop_rows for k in FINGERS if decisions[k][r] == "stop"
+             and not (num[k][r] == n_max and pressure[k][r] < safety[k - 1])]
+    after = 0
+    if row is not None:
+        sent = df["tactile_steps_sent"].to_numpy(float)
+        cmd = np.column_stack([df[f"cmd_counts{g}"].to_numpy(float) for g in FINGERS])
+        after = int(np.sum(np.diff(sent[row:]) != 0)
+                    + np.sum(np.any(np.diff(cmd[row:], axis=0) != 0, axis=1)))
+    if row is None:
+        give_ups = [float(pressure[k][r]) for r in ticks for k in FINGERS
+                    if decisions[k][r] == "give_up_continue"]
         low = f"{min(give_ups):.1f} kPa" if give_ups else "no give-up"
         text = (f"no stop (line 13): the trajectory ran to its end; lowest p after {n_max} "
                 f"readjustments {low} (safety {safety.tolist()} kPa)")
-        # issue 18: the claim says the task stops *when* a finger stays under safetyThres
-        # after the maximum readjustments; a run where that never happens must not stop
-        return {"never under safetyThres after max readjustments without stopping":
-                    not cond_rows}, text, None
-    row = stop_rows[0]
-    k = next(k for k in FINGERS if _text(df[f"alg_decision{k}"])[row] == "stop")
-    p = float(finger_pressure(df, k)[row])
-    sent = df["tactile_steps_sent"].to_numpy(float)
-    cmd = np.column_stack([df[f"cmd_counts{g}"].to_numpy(float) for g in FINGERS])
-    after_sent = bool(np.all(sent[row:] == sent[row]))
-    after_cmd = bool(np.all(cmd[row:] == cmd[row]))
-    step = int(df["tactile_step"].iat[row])
-    text = (f"stop at {float(df['t'].iat[row]):.2f} s, step {step}: finger {k} p = {p:.1f} kPa < "
-            f"safety {safety[k - 1]:g} kPa after {n_max} readjustments; "
-            f"{'no' if after_sent else 'a'} trajectory step sent after it")
-    return {"the task stops (line 13)": True,
-            "at the stop the finger is under safetyThres after max readjustments":
-                p < safety[k - 1] and float(df[f"alg_num_readjust{k}"].iat[row]) == n_max,
-            "no trajectory step (or target change) after the stop": after_sent and after_cmd,
-            "the stop is the first tick meeting line 12's condition":
-                bool(cond_rows) and cond_rows[0] == row}, text, row
+    else:
+        k = next(k for k in FINGERS if decisions[k][row] == "stop")
+        text = (f"stop at {float(df['t'].iat[row]):.2f} s, step {int(df['tactile_step'].iat[row])}"
+                f": finger {k} p = {float(pressure[k][row]):.1f} kPa (safety "
+                f"{safety[k - 1]:g} kPa) after {int(num[k][row])} readjustments; {after} "
+                f"trajectory steps or target changes after it")
+    if missed:
+        text += (f"; {len(missed)} checks met line 12's condition without stopping (first at "
+                 f"{float(df['t'].iat[missed[0][0]]):.2f} s, finger {missed[0][1]})")
+    # issue 18: the claim says the task stops *when* a finger stays under safetyThres after
+    # the maximum readjustments: a stop only then, and then at once
+    return [
+        _count("the task stops when a finger stays under safetyThres after max readjustments "
+               "(checks meeting line 12's condition that do not stop it, up to the stop)",
+               len(missed)),
+        _count("... and only then (stops without line 12's condition)", len(wrong)),
+        _count("after the stop no trajectory step is performed (steps or target changes after "
+               "it)", after),
+    ], text, row
 
 
 def _drop(df: pd.DataFrame, end_row: int | None) -> tuple[bool, str, float]:
-    """(dropped before the end row, text, max deviation from the plan before it [m])."""
+    """(dropped between the grasp and the end row, text, max deviation from the plan before
+    it [m]). From the grasp: the manipulation rows (the audit's ``dropped``) and, issue 18,
+    the rows where the support is lowered (before the manipulation's reference pose exists):
+    there the cylinder is lost when no finger and no palm touches it and it has left its
+    pose in the palm frame at the start of the lowering by more than DROP_M."""
     rows, task_end = _task_rows(df)
     end = end_row if end_row is not None else (task_end if task_end is not None else len(df))
     before = rows[rows <= end]
     dropped = _bool(df["dropped"])
+    lowering = np.flatnonzero(_text(df["phase"]) == "support")
+    lost_lowering, moved = np.zeros(0, bool), 0.0
+    if lowering.size:
+        P = df[["obj_x", "obj_y", "obj_z"]].to_numpy(float)[lowering]
+        shift = np.linalg.norm(P - P[0], axis=1)
+        held = np.zeros(lowering.size, bool)
+        for col in [f"contact{k}" for k in FINGERS] + ["contact_palm"]:
+            if col in df.columns:
+                held |= _bool(df[col])[lowering]
+        lost_lowering = ~held & (shift > DROP_M)
+        moved = float(np.nanmax(shift))
     dev = plan_deviation(df)
     dmax = float(np.nanmax(dev[before])) if before.size else float("nan")
     after = np.arange(end, len(df))
-    text = (f"max deviation from the planned path {dmax * 1e3:.2f} mm before the "
-            f"{'stop' if end_row is not None else 'end of the trajectory'}"
-            f"{'' if not after.size else f', {np.nanmax(dev[after]) * 1e3:.2f} mm while held after it'}"
-            f"; dropped {'before' if dropped[before].any() else 'never before'} it"
-            f"{' (and after it)' if dropped[after].any() else ''}")
-    return bool(dropped[before].any()), text, dmax
+    lost = bool(dropped[before].any() or lost_lowering.any())
+    text = ""
+    if lowering.size:
+        text = (f"the cylinder moved {moved * 1e3:.2f} mm in the hand while the support was "
+                f"lowered{' (lost there)' if lost_lowering.any() else ''}; ")
+    held_after = ("" if not after.size
+                  else f", {np.nanmax(dev[after]) * 1e3:.2f} mm while held after it")
+    text += (f"max deviation from the planned path {dmax * 1e3:.2f} mm before the "
+             f"{'stop' if end_row is not None else 'end of the trajectory'}{held_after}; "
+             f"dropped {'before' if lost else 'never before'} it"
+             f"{' (and after it)' if dropped[after].any() else ''}")
+    return lost, text, dmax
 
 
 def check_5(runs: dict[str, RunFiles]) -> ClaimResult:
@@ -258,14 +285,14 @@ def check_5(runs: dict[str, RunFiles]) -> ClaimResult:
     if not rows.size:
         return ClaimResult("exp3 never reached the manipulation phase", "not_reproduced")
     thr, safety, n_max, increment = _thresholds(run)
-    checks, t1 = _decisions(df, thr, n_max)
+    c1, t1 = _decisions(df, thr, n_max)
     c2, t2 = _flat(df, increment)
-    checks.update(c2)
     c3, t3, stop_row = _stop(df, safety, n_max)
-    checks.update(c3)
-    dropped, t4, dev = _drop(df, stop_row)
-    checks["the object is not dropped before the stop"] = not dropped
-    return _verdict(f"with Algorithm 1: {t1}; {t2}; {t3}; {t4}", checks)
+    dropped, t4, _ = _drop(df, stop_row)
+    c4 = Clause.flag("the object is not dropped before the stop (from the grasp on)",
+                     not dropped, "paper: Sec. 6, the stop prevents 'grasp instability'")
+    return ClaimResult.from_clauses(f"with Algorithm 1: {t1}; {t2}; {t3}; {t4}",
+                                    [*c1, *c2, *c3, c4])
 
 
 def check_5b(runs: dict[str, RunFiles]) -> ClaimResult:
@@ -289,8 +316,8 @@ CLAIM_5 = Claim(
     PAPER, "5", "Exp 3: readjustments happen exactly when p < threshold; motor counts stay "
     "flat during readjustments; the task stops when a finger stays under the safety threshold "
     "after the maximum readjustments; the object is never dropped before that stop",
-    f"readjust iff p < 10/10/20 kPa; counts per readjustment <= {FLAT_FRACTION:g} of a "
-    f"trajectory step; a stop iff p < safety after max readjustments; no drop before it",
+    f"readjust iff p < 10/10/20 kPa; the readjusted finger advances < {FLAT_FRACTION:g} of "
+    f"its increment; a stop iff p < safety after max readjustments; no drop before it",
     ("exp3",), check_5,
     quote=('Sec. 6: "This maximum contact pressure is firstly compared with the readjustment '
            'threshold. ... Otherwise, the tactile control algorithm executes a small increment '

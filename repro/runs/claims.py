@@ -121,7 +121,7 @@ class Clause:
     def margin(self) -> float:
         """Signed distance to the threshold in ``unit``, positive on the holding side."""
         d = self.measured - self.threshold
-        return d if self.op in (">=", ">") else -d
+        return (d if self.op in (">=", ">") else -d) + 0.0  # + 0.0: no "-0" at the bound
 
     @property
     def relative_margin(self) -> float:
