@@ -24,7 +24,7 @@ import math
 import os
 import re
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import pandas as pd
@@ -38,6 +38,8 @@ __all__ = [
     "CLAIMS_COLUMNS",
     "CLAUSE_COLUMNS",
     "MARGINAL_FRACTION",
+    "VARIATION_COLUMNS",
+    "VARIATION_FILE",
     "STATUSES",
     "Claim",
     "ClaimResult",
@@ -58,7 +60,13 @@ CLAIMS_COLUMNS = ("paper", "claim", "description", "expected", "measured", "stat
                   "clauses", "marginal")
 #: The tidy clause table (results/claim_clauses.csv): one row per clause of every claim.
 CLAUSE_COLUMNS = ("paper", "claim", "clause", "measured", "op", "threshold", "unit", "source",
-                  "holds", "margin", "relative_margin", "marginal")
+                  "holds", "margin", "relative_margin", "varied_min", "varied_max",
+                  "flips_within_variation", "marginal")
+#: The measured machine-to-machine variation of every clause's figure
+#: (``tests/measure_clause_variation.py``), read from the results folder when present.
+VARIATION_FILE = "clause_variation.csv"
+VARIATION_COLUMNS = ("paper", "claim", "clause", "committed", "min", "max", "n_perturbations",
+                     "perturbations", "flips", "runs_remade", "machine")
 #: A clause whose measured figure is within this fraction of its threshold is ``marginal``
 #: (issue 18: within 10 %).
 MARGINAL_FRACTION = 0.10
@@ -83,6 +91,8 @@ class Clause:
             and never ``marginal``: the signed margin says it).
         evidence: False for a clause that holds by construction of the run (e.g. a phase in
             which the code sends no command): reported, but not counted for the verdict.
+        variation: (smallest, largest) figure measured on the same runs remade under the
+            perturbations of another machine (:data:`VARIATION_FILE`); None: not measured.
     """
 
     name: str
@@ -93,6 +103,7 @@ class Clause:
     source: str
     relative: bool = True
     evidence: bool = True
+    variation: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.op not in _OPS:
@@ -130,16 +141,30 @@ class Clause:
             return math.nan
         return self.margin / abs(self.threshold)
 
+    def _holds_at(self, x: float) -> bool:
+        return bool(not math.isnan(x) and _OPS[self.op](x, self.threshold))
+
+    @property
+    def flips(self) -> bool:
+        """The verdict differs somewhere within the measured :attr:`variation` (False when
+        none was measured)."""
+        if self.variation is None:
+            return False
+        lo, hi = self.variation
+        return len({self.holds, self._holds_at(lo), self._holds_at(hi)}) > 1
+
     @property
     def marginal(self) -> bool:
-        """Within :data:`MARGINAL_FRACTION` of its threshold, on either side."""
+        """Within :data:`MARGINAL_FRACTION` of its threshold, on either side, or its verdict
+        flips within the measured machine-to-machine variation (issue 18)."""
         r = self.relative_margin
-        return bool(math.isfinite(r) and abs(r) < MARGINAL_FRACTION)
+        return bool(math.isfinite(r) and abs(r) < MARGINAL_FRACTION) or self.flips
 
     def summary(self) -> str:
         """One line: figure, bound, verdict, margin."""
         u = "" if self.unit == "-" else f" {self.unit}"
-        flag = (", MARGINAL" if self.marginal else "") + (
+        flag = (", MARGINAL" + (": flips within the machine variation" if self.flips else "")
+                if self.marginal else "") + (
             "" if self.evidence else ", by construction: not counted")
         return (f"{self.name}: {self.measured:.4g}{u} {self.op} {self.threshold:.4g}{u} "
                 f"({'holds' if self.holds else 'fails'}, margin {self.margin:+.3g}{u}{flag})")
@@ -349,7 +374,38 @@ def clause_rows(claim: Claim, clauses: Sequence[Clause]) -> list[dict[str, objec
     return [{"paper": claim.paper, "claim": claim.claim, "clause": c.name,
              "measured": c.measured, "op": c.op, "threshold": c.threshold, "unit": c.unit,
              "source": c.source, "holds": c.holds, "margin": c.margin,
-             "relative_margin": c.relative_margin, "marginal": c.marginal} for c in clauses]
+             "relative_margin": c.relative_margin,
+             "varied_min": c.variation[0] if c.variation else math.nan,
+             "varied_max": c.variation[1] if c.variation else math.nan,
+             "flips_within_variation": c.flips, "marginal": c.marginal} for c in clauses]
+
+
+def read_variation(results_dir: Path) -> dict[tuple[str, str, str], tuple[float, float]]:
+    """The measured variation of each clause's figure, keyed (paper, claim, clause), from
+    ``results_dir / VARIATION_FILE`` ({} when the file is absent). The committed figure of
+    today's run joins the range, so a stale file cannot narrow it."""
+    path = Path(results_dir) / VARIATION_FILE
+    if not path.is_file():
+        return {}
+    df = pd.read_csv(path, dtype={"paper": str, "claim": str, "clause": str})
+    missing = set(VARIATION_COLUMNS) - set(df.columns)
+    if missing:
+        raise ReproError(f"{path}: columns {sorted(missing)} missing")
+    return {(r.paper, r.claim, r.clause): (float(r.min), float(r.max))
+            for r in df.itertuples(index=False)}
+
+
+def with_variation(claim: Claim, clauses: Sequence[Clause],
+                   variation: Mapping[tuple[str, str, str], tuple[float, float]]
+                   ) -> tuple[Clause, ...]:
+    """``clauses`` with their measured variation attached (widened to today's figure)."""
+    out = []
+    for c in clauses:
+        v = variation.get((claim.paper, claim.claim, c.name))
+        if v is not None and not math.isnan(c.measured):
+            v = (min(v[0], c.measured), max(v[1], c.measured))
+        out.append(replace(c, variation=v) if v is not None else c)
+    return tuple(out)
 
 
 def _default_hash(papers: Mapping[str, Paper], paper: str, name: str) -> str:
@@ -428,6 +484,7 @@ def evaluate_claims(
             registered.append(load_papers())
         return registered[0]
 
+    variation = read_variation(results_dir)
     rows = []
     for claim in claims:
         runs = _load_runs(claim, results_dir, cache, get_papers)
@@ -448,6 +505,8 @@ def evaluate_claims(
             message = f"check returned {type(result).__name__}, not ClaimResult"
             rows.append(_row(claim, message, "not_run"))
             continue
+        if variation and result.clauses:
+            result = replace(result, clauses=with_variation(claim, result.clauses, variation))
         extent, cut_short = extent_note(runs, claim.whole_run, claim.done_events)
         status = ("not_reproduced" if cut_short and result.status in (
             "reproduced", "partly_reproduced") else result.status)

@@ -348,7 +348,9 @@ def _paper_section(
             f"({counts['partly_reproduced']} partly reproduced, "
             f"{counts['not_reproduced']} not reproduced, {counts['not_run']} not run). "
             "Claims judged clause by clause list each clause's figure, bound, verdict and "
-            "margin; a clause within 10 % of its bound is named under `marginal` "
+            "margin; a clause within 10 % of its bound, or whose verdict flips within the "
+            "figure's measured machine-to-machine variation (results/clause_variation.csv, "
+            "tests/measure_clause_variation.py), is named under `marginal` "
             "(results/claim_clauses.csv has one row per clause).",
             "",
             markdown_table(paper_claims.columns, paper_claims.itertuples(index=False)),
