@@ -27,6 +27,15 @@ def _fails(res) -> bool:  # type: ignore[no-untyped-def]
     want = "partly_reproduced" if 0 < len(failing) < len(res.clauses) else "not_reproduced"
     return bool(failing) and res.status == want
 
+def _alone(res, key: str, *also: str) -> None:  # type: ignore[no-untyped-def]
+    """Issue 18: exactly one clause fails, the one named by ``key`` (or exactly those named,
+    when the others cannot be measured without it)."""
+    failing = [c.name for c in res.clauses if not c.holds]
+    want = (key, *also)
+    assert len(failing) == len(want) and all(any(w in f for f in failing) for w in want), \
+        failing
+
+
 def _run(df: pd.DataFrame, mins: dict[str, float] | None = None) -> RunFiles:
     ev = pd.DataFrame([], columns=["t", "step", "kind", "detail"])
     summary = {"stop_reason": "duration reached",
@@ -75,10 +84,17 @@ def _base() -> pd.DataFrame:
     return df
 
 
+def _cold() -> pd.DataFrame:
+    """Cold VVS starts (2 cm / 10 deg) that all converge."""
+    return pd.DataFrame({"start": range(4), "frame": [0, 0, 1, 1], "offset_m": 0.02,
+                         "offset_deg": 10.0, "residual_px": 0.05, "pos_err_m": 3e-4,
+                         "to_warm_m": 1e-5})
+
+
 def _runs(exp1: pd.DataFrame | None = None, exp2: pd.DataFrame | None = None,
           d_mini: float = 0.06, d_arm: float = 0.3, d_base: float = 0.03,
           d_hand: float = 0.25) -> dict[str, RunFiles]:
-    return {"exp1": _run(_exp1() if exp1 is None else exp1),
+    return {"vvs_cold": _run(_cold()), "exp1": _run(_exp1() if exp1 is None else exp1),
             "exp2": _run(_exp2() if exp2 is None else exp2,
                          {"mini_dist_human_hand_r": d_mini, "mini_dist_table": 0.01,
                           "pa10_dist_human_torso": d_arm, "bh8_dist_human_hand_l": d_hand}),
@@ -115,6 +131,10 @@ def _wander() -> pd.DataFrame:
 def test_claim_1_fails_on_each_clause(runs: dict[str, RunFiles], clause: str) -> None:
     res = cl.check_1(runs)
     assert _fails(res) and clause in res.measured, res.measured
+    # never reached, or reached only once the arm stopped: "stay there while it moves"
+    # (and "while it still moves") have nothing to be measured on
+    also = {"reach s*": ("still moves", "stay there"), "still moves": ("stay there",)}
+    _alone(res, clause, *also.get(clause, ()))
 
 
 def test_claim_2_fails_when_V_rises_or_the_base_never_stops() -> None:
@@ -147,23 +167,30 @@ def test_claim_2_fails_when_V_rises_or_the_base_never_stops() -> None:
 def test_claim_3_fails_on_each_clause(col: str, value: float, clause: str) -> None:
     res = cl.check_3(_runs(exp2=_exp2(**{col: np.full(N, value)})))
     assert _fails(res) and clause in res.measured, res.measured
+    _alone(res, f"exp2: {clause}" if clause == "e_v -> 0" else clause)
 
 
 def test_claim_4_fails_on_each_clause() -> None:
     res = cl.check_4(_runs(d_mini=0.035))
     assert _fails(res) and "moves the mini-robot away" in res.measured
+    _alone(res, "moves the mini-robot away")
     res = cl.check_4(_runs(d_mini=-0.01, d_base=-0.05))
     assert _fails(res) and "dist > 0" in res.measured
+    _alone(res, "dist > 0")
     res = cl.check_4(_runs(d_arm=-0.001))
     assert _fails(res) and "dist > 0" in res.measured
+    _alone(res, "dist > 0")
     res = cl.check_4(_runs(d_hand=-0.001))  # issue 18: the hand on the PA-10 counts too
     assert _fails(res) and "dist > 0" in res.measured
+    _alone(res, "dist > 0")
     f1y = _exp2()
     f1y.loc[(T > 10) & (T < 10.5), "e_f2y_px"] = 30.0
     res = cl.check_4(_runs(exp2=f1y))
     assert _fails(res) and "held coordinate (f2y) stays" in res.measured
+    _alone(res, "held coordinate (f2y) stays")
     res = cl.check_4(_runs(exp2=_exp2(e_s_px=np.full(N, 20.0))))
     assert _fails(res) and "s -> s*" in res.measured
+    _alone(res, "s -> s*")
     lost = _exp2()  # issue 18: dots lost at the end are not "s -> s*"
     lost.loc[N - 5:, "e_s_px"] = np.nan
     assert _fails(cl.check_4(_runs(exp2=lost)))
@@ -172,6 +199,7 @@ def test_claim_4_fails_on_each_clause() -> None:
     assert cl.check_4(_runs(exp2=offset)).status == "reproduced"
     res = cl.check_4(_runs(exp2=_exp2(active_span=(9.7, 30.0))))  # the human never leaves
     assert _fails(res) and "NaN if he never leaves" in res.measured
+    _alone(res, "NaN if he never leaves")
     res = cl.check_4(_runs(exp2=_exp2(active_span=(0.0, 0.0))))
     assert res.status == "not_reproduced" and "never came within dmin" in res.measured
     # the human touching without e2 is said

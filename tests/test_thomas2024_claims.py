@@ -66,6 +66,16 @@ def _assert_pass_and_fail(check: Callable[[dict[str, RunFiles]], object], name: 
     res = check({name: bad})
     assert _fails(res), res.measured
     assert clause in res.measured.split(" -- not met: ", 1)[1]
+    _alone(res, clause)
+
+
+def _alone(res, clause: str, *also: str) -> None:  # type: ignore[no-untyped-def]
+    """Issue 18: the break fails that clause and no other (or exactly those named, when one
+    figure cannot be measured without another clause failing)."""
+    failing = [c.name for c in res.clauses if not c.holds]
+    want = (clause, *also)
+    assert len(failing) == len(want) and all(
+        any(w in f for f in failing) for w in want), failing
 
 
 # ------------------------------------------------------------------ claim 1
@@ -130,7 +140,9 @@ def _case1_events(shift: float = 0.0) -> pd.DataFrame:
 
 
 @pytest.mark.parametrize("breaks, clause", [
-    ("late", "time off the paper's"),
+    ("late", "ring 2 first near contact, time off the paper's"),
+    ("ring1_late", "ring 1 near contact, time off the paper's"),
+    ("other_late", "ring 2 other side, time off the paper's"),
     ("ring1_first", "order ring 2, ring 1, ring 2"),
     ("same_side", "order ring 2, ring 1, ring 2"),
     ("left_first", "meets the right obstacle"),
@@ -139,10 +151,21 @@ def _case1_events(shift: float = 0.0) -> pd.DataFrame:
 ])
 def test_claim3(breaks: str, clause: str) -> None:
     bad = _case1_events()
-    if breaks == "late":
-        bad = _case1_events(shift=1.5)
-    elif breaks == "ring1_first":
-        _contact(bad, "r1_cbf15", 1.0)
+
+    def move(cols: tuple[str, ...], t0: float) -> None:
+        for j, col in enumerate(cols):
+            bad[col] = 0.5
+            _contact(bad, col, t0 + 0.1 * j)
+
+    if breaks == "late":  # ring 2 first at 3.6 s (paper ~2.5 s), the order kept
+        move(("r2_cbf4", "r2_cbf5"), 3.6)
+    elif breaks == "ring1_late":  # ring 1 at 2.9 s: before ring 2's other side, 1.1 s early
+        move(("r1_cbf16", "r1_cbf17"), 2.9)
+    elif breaks == "other_late":
+        move(("r2_cbf13", "r2_cbf14"), 6.2)
+    elif breaks == "ring1_first":  # ring 1 (3.1 s) before ring 2 (3.3 s), each within 1 s
+        move(("r2_cbf4", "r2_cbf5"), 3.3)
+        move(("r1_cbf16", "r1_cbf17"), 3.1)
     elif breaks == "same_side":  # the later ring-2 group is 60-80 deg round the ring
         bad["r2_cbf13"] = 0.5
         bad["r2_cbf14"] = 0.5
@@ -160,6 +183,8 @@ def test_claim3(breaks: str, clause: str) -> None:
     assert "ring 2 other side at 5.00 s (paper ~5 s)" in good.measured
     res = cl.check_3({"case1": _run(bad)})
     assert _fails(res) and clause in res.measured.split(" -- not met: ")[1]
+    # with no ring-2 contact on the other side, its time cannot be measured either
+    _alone(res, clause, *(("ring 2 other side, time",) if breaks == "same_side" else ()))
 
 
 def test_group_directions() -> None:
@@ -212,6 +237,7 @@ def test_claim4(breaks: str, clause: str) -> None:
     assert "sensor 6 at 1.3 cm (our number; the paper's is 9)" in good.measured
     res = cl.check_4({"case2": _run(bad, events)})
     assert _fails(res) and clause in res.measured.split(" -- not met: ")[1]
+    _alone(res, clause)
 
 
 # ------------------------------------------------------------------ claim 5
@@ -305,8 +331,10 @@ def test_claim7(breaks: str, clause: str) -> None:
         bad = _case3_hand(cbf_at_approach=0.1)
     else:
         bad = _case3_hand()
-        if breaks == "no_return":
-            _set_e(bad, np.linspace(0.5, 6.0, len(bad)))
+        if breaks == "no_return":  # e rises at each approach but stays up after the last
+            end = bad["t"] > RING1_APPROACHES[-1][1] + 1.0
+            e_cols = [f"e{i}_{a}" for i in range(1, 5) for a in "uv"]
+            bad.loc[end, e_cols] = 6.0 / np.sqrt(8.0)
         else:
             bad.loc[300, "dist_min"] = -0.001
     _assert_pass_and_fail(cl.check_7, "case3", _run(_case3_hand()), _run(bad), clause)
@@ -326,10 +354,12 @@ def test_claim8_kappa_zero() -> None:
     df.loc[len(df) - 25:, "r1_kappa3"] = 0.05  # most of the last second
     res = cl.check_8({"case1": _run(df)})
     assert _fails(res) and "kappa* = 0 at convergence" in res.measured
+    _alone(res, "kappa* = 0 at convergence")
     stuck = _base()
     _set_e(stuck, np.linspace(300, 30, len(stuck)))
     res = cl.check_8({"case1": _run(stuck)})
     assert _fails(res) and "converges" in res.measured
+    _alone(res, "converges")
 
 
 def test_groups_are_adjacent_and_cyclic() -> None:

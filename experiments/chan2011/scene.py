@@ -126,8 +126,9 @@ def _volume(shape: str, size: tuple[float, ...]) -> float:
 
 #: The conrod's centroid in its model frame [m] (volume-weighted centre of CONROD_PARTS,
 #: uniform density): (-0.0374, 0, 0.0131). The experiment's poses refer to it (see SETTINGS).
-CONROD_CENTROID = sum(_volume(sh, sz) * np.asarray(c) for sh, sz, c in CONROD_PARTS) / sum(
-    _volume(sh, sz) for sh, sz, _ in CONROD_PARTS)
+CONROD_CENTROID: np.ndarray = np.asarray(sum(
+    _volume(sh, sz) * np.asarray(c) for sh, sz, c in CONROD_PARTS) / sum(
+    _volume(sh, sz) for sh, sz, _ in CONROD_PARTS), dtype=float)
 
 
 def at_centroid(T_base_centroid: np.ndarray) -> np.ndarray:

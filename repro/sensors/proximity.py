@@ -204,13 +204,14 @@ class ProximityRing:
         body = np.array([h[0] for h in hits], dtype=int).reshape(m, k)
         d = np.array([h[2] if h[0] >= 0 else 1.0 for h in hits]).reshape(m, k)
         d = d * self.spec.max_range
-        hit = body >= 0
+        hit: np.ndarray = np.asarray(body >= 0)
         nearest = np.where(hit, d, np.inf).argmin(axis=1)
         rows = np.arange(m)
         out_body = np.where(hit.any(axis=1), body[rows, nearest], -1)
         normals = np.array([h[4] if h[0] >= 0 else (np.nan,) * 3 for h in hits],
                            dtype=float).reshape(m, k, 3)
-        self.last_normals = np.where(hit.any(axis=1)[:, None], normals[rows, nearest], np.nan)
+        any_hit: np.ndarray = np.asarray(hit.any(axis=1))
+        self.last_normals = np.where(any_hit[:, None], normals[rows, nearest], np.nan)
         if self.spec.cone_return == "nearest":
             out = np.where(hit.any(axis=1), d[rows, nearest], self.spec.max_range)
         else:
