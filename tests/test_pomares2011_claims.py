@@ -221,3 +221,19 @@ def test_claims_1_to_4_quote_the_paper() -> None:
     """Issue 18: the paper's words beside each check."""
     for claim in cl.CLAIMS_1_4:
         assert claim.quote.startswith("Sec.") and '"' in claim.quote, claim.claim
+
+
+def test_claim_2_and_3_figures_draw_from_the_files() -> None:
+    """The figures of claims 2 (V and V_true) and 3 (the cold starts) read only the runs."""
+    import matplotlib.pyplot as plt
+
+    from experiments.pomares2011.figures import lyapunov, vvs_cold_starts
+
+    fig = lyapunov(_run(_exp1()))
+    assert [len(ax.lines) for ax in fig.axes] == [2, 2]
+    right = fig.axes[1].lines[0].get_xdata()
+    assert right.min() >= 19.0  # the window in which the PA-10 is still
+    plt.close(fig)
+    fig = vvs_cold_starts(_run(_cold()))
+    assert len(fig.axes[0].lines) == 2 and len(fig.axes[0].get_xticks()) == 1  # + the bound
+    plt.close(fig)

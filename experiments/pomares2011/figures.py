@@ -165,6 +165,55 @@ def indirect_baseline(direct: RunFiles, indirect: RunFiles) -> plt.Figure:
     return fig
 
 
+def lyapunov(run: RunFiles) -> plt.Figure:
+    """Claim 2's evidence: V (10) from the detected points and from the exact projections
+    (V_true), over the run and (right) the window in which the PA-10 is still."""
+    df = run.trace
+    t = df["t"].to_numpy(float)
+    V = df["V"].to_numpy(float)
+    Vt = df["V_true"].to_numpy(float) if "V_true" in df.columns else np.full(len(t), np.nan)
+    still = df["arm_reached"].fillna(False).astype(bool).to_numpy()
+    fig, axes = plt.subplots(1, 2, figsize=(8.0, 3.0))
+    for ax, sel in ((axes[0], np.ones(len(t), bool)), (axes[1], still)):
+        if not sel.any():
+            continue
+        ax.plot(t[sel], V[sel], lw=0.8, label="V, detected points")
+        ax.plot(t[sel], Vt[sel], lw=0.8, ls="--", label="V_true, exact projections")
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel("V (J)")
+    axes[0].set_yscale("log")
+    if still.any():
+        axes[0].axvspan(t[np.argmax(still)], t[-1], color="0.9", zorder=0,
+                        label="PA-10 still")
+    axes[0].legend(fontsize=7)
+    axes[1].set_title("PA-10 still", fontsize=8)
+    fig.suptitle("Exp. 1: Lyapunov function (10) (claim 2, eq. (15))", fontsize=9)
+    return fig
+
+
+def vvs_cold_starts(run: RunFiles) -> plt.Figure:
+    """Claim 3's cold starts: final position error and residual of every start, by offset."""
+    df = run.trace
+    fig, axes = plt.subplots(1, 2, figsize=(7.0, 3.0))
+    groups = list(df.groupby(["offset_m", "offset_deg"]))
+    for j, (_, g) in enumerate(groups):
+        x = j + np.linspace(-0.25, 0.25, len(g))
+        axes[0].semilogy(x, np.maximum(g["pos_err_m"].to_numpy(float) * 1e3, 1e-4), ".",
+                         ms=3)
+        axes[1].semilogy(x, np.maximum(g["residual_px"].to_numpy(float), 1e-4), ".", ms=3)
+    labels = [f"{m * 100:g} cm\n{d:g} deg" for (m, d), _ in groups]
+    for ax, ylabel in zip(axes, ("final position error (mm)", "final residual (px)"),
+                          strict=True):
+        ax.set_xticks(range(len(groups)), labels, fontsize=7)
+        ax.set_ylabel(ylabel)
+        ax.set_xlabel("start offset from the true pose")
+    axes[0].axhline(2.0, color="0.4", lw=0.6, ls=":")
+    axes[1].axhline(0.5, color="0.4", lw=0.6, ls=":")
+    fig.suptitle("VVS (22)-(24) from cold starts on rendered frames (claim 3; bounds dotted)",
+                 fontsize=9)
+    return fig
+
+
 def make_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
     apply_style()
     written: list[Path] = []
@@ -175,7 +224,8 @@ def make_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
                  "fig05"),
                 (torques(exp1, "Mini-robot torques (cf. Fig. 6)"), "fig06"),
                 (image_trajectory(exp1, "su", "s_u_star_px", "Reference Virtual Camera "
-                                  "(cf. Fig. 7)"), "fig07")):
+                                  "(cf. Fig. 7)"), "fig07"),
+                (lyapunov(exp1), "lyapunov")):
             written += save_figure(fig, figures_dir, PAPER, name)
             plt.close(fig)
     exp2 = load_run_if_present(Path(results_dir) / PAPER, "exp2")
@@ -191,6 +241,11 @@ def make_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
     if exp2 is not None and base is not None:
         fig = distance_baseline(exp2, base, float(exp2.manifest["config"]["dmin"]))
         written += save_figure(fig, figures_dir, PAPER, "baseline_no_secondary")
+        plt.close(fig)
+    cold = load_run_if_present(Path(results_dir) / PAPER, "vvs_cold")
+    if cold is not None:
+        fig = vvs_cold_starts(cold)
+        written += save_figure(fig, figures_dir, PAPER, "vvs_cold")
         plt.close(fig)
     ind = load_run_if_present(Path(results_dir) / PAPER, "exp1_indirect")
     if exp1 is not None and ind is not None:
