@@ -194,7 +194,8 @@ class ClaimResult:
     @classmethod
     def from_clauses(cls, measured: str, clauses: Sequence[Clause]) -> ClaimResult:
         """The claim is ``reproduced`` when every clause holds, ``partly_reproduced`` when
-        some do (``measured`` names those that fail), ``not_reproduced`` when none does."""
+        some do (``measured`` names those that hold, then those that fail: issue 18),
+        ``not_reproduced`` when none does."""
         clauses = tuple(clauses)
         counted = [c for c in clauses if c.evidence]
         if not counted:
@@ -203,7 +204,10 @@ class ClaimResult:
         failed = [c.name for c in counted if not c.holds]
         status = ("reproduced" if not failed else
                   "partly_reproduced" if held else "not_reproduced")
-        text = measured + (f" -- not met: {'; '.join(failed)}" if failed else "")
+        text = measured
+        if failed and held:
+            text += f" -- held ({len(held)} of {len(counted)}): {'; '.join(c.name for c in held)}"
+        text += f" -- not met: {'; '.join(failed)}" if failed else ""
         return cls(text, status, clauses)
 
 
