@@ -62,7 +62,9 @@ def test_the_exact_run_converges_from_2_cm_and_its_files_are_complete(exact_run:
     assert (small["init_residual_px"] > 10).all()  # a real error to cancel
     # the frame's configuration is in the row and reproduces the camera pose's truth
     scene = files.scene
-    assert scene["bodies"][0]["q_columns"][:3] == ["q1", "q2", "q3"]
+    robot = next(b for b in scene["bodies"] if b["kind"] == "urdf")
+    assert robot["q_columns"] == [] and "q1..q17" in scene["note"]
+    assert {f"q{j}" for j in range(1, 18)} <= set(df.columns)
     assert np.asarray(scene["points_object"]).shape == (4, 3)
 
 

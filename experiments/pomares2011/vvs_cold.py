@@ -138,6 +138,8 @@ def run(config: VVSColdConfig, out_dir: Path, experiment: str | None = None) -> 
                         "the mini-robot camera (x right, y down, z forward)")
         camera = Camera(sc.INTRINSICS, mode=config.camera_mode)
         desc = scene.describe()
+        robot = next(b for b in desc["bodies"] if b["kind"] == "urdf")
+        robot["q_columns"] = []  # no time axis: each row's joints are its q1..q17 columns
         desc["cameras"] = {"camera": {"robot": "pa10", "frame": "mini_camera_optical",
                                       "T_frame_camera": "identity", "target": "dots",
                                       "mode": config.camera_mode, **_camera_json(camera)}}
