@@ -185,3 +185,22 @@ def test_save_figure_is_deterministic(tmp_path: Path) -> None:
     assert b"CreationDate" not in files[0][1].read_bytes()
     with pytest.raises(ValueError):
         save_figure(fig, tmp_path, "../evil", "f")
+
+
+def test_variation_note_counts_clauses_and_flips(tmp_path: Path) -> None:
+    from repro.runs.claims import VARIATION_COLUMNS, VARIATION_FILE
+    from repro.runs.report import _variation_note
+
+    assert "not been measured" in _variation_note(tmp_path, "p2020")
+    row = dict.fromkeys(VARIATION_COLUMNS, "")
+    pd.DataFrame([{**row, "paper": "p2020", "claim": "1", "clause": "a", "flips": True,
+                   "perturbations": "q0:+1e-12 blas:Haswell"},
+                  {**row, "paper": "p2020", "claim": "1", "clause": "b", "flips": False,
+                   "perturbations": "q0:+1e-12 blas:Haswell"},
+                  {**row, "paper": "other", "claim": "1", "clause": "a", "flips": True,
+                   "perturbations": "q0:+1e-12"}]).to_csv(tmp_path / VARIATION_FILE,
+                                                          index=False)
+    note = _variation_note(tmp_path, "p2020")
+    assert "2 clauses under 2 perturbations (blas:Haswell, q0:+1e-12" in note
+    assert note.endswith("1 flip.")
+    assert "not been measured" in _variation_note(tmp_path, "third")

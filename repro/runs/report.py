@@ -324,6 +324,25 @@ def _bench_table(bench: pd.DataFrame) -> str:
         "%), from one short run each.")
 
 
+def _variation_note(results_dir: Path, paper: str) -> str:
+    """One sentence on the measured machine-to-machine variation of the paper's clauses
+    (results/clause_variation.csv), or that it was not measured."""
+    from repro.runs.claims import VARIATION_FILE
+
+    path = Path(results_dir) / VARIATION_FILE
+    if not path.is_file():
+        return " The clauses' machine-to-machine variation has not been measured."
+    df = pd.read_csv(path, dtype={"paper": str, "claim": str, "clause": str},
+                     keep_default_na=False)
+    df = df[df["paper"] == paper]
+    if df.empty:
+        return " The clauses' machine-to-machine variation has not been measured."
+    flips = df["flips"].astype(str).str.lower().eq("true")
+    perts = sorted({p for s in df["perturbations"] for p in str(s).split()})
+    return (f" Variation measured for {len(df)} clauses under {len(perts)} perturbations "
+            f"({', '.join(perts)}; {VARIATION_FILE}): {int(flips.sum())} flip.")
+
+
 def _paper_section(
     paper: str,
     *,
@@ -351,7 +370,8 @@ def _paper_section(
             "margin; a clause within 10 % of its bound, or whose verdict flips within the "
             "figure's measured machine-to-machine variation (results/clause_variation.csv, "
             "tests/measure_clause_variation.py), is named under `marginal` "
-            "(results/claim_clauses.csv has one row per clause).",
+            "(results/claim_clauses.csv has one row per clause)." + _variation_note(
+                results_dir, paper),
             "",
             markdown_table(paper_claims.columns, paper_claims.itertuples(index=False)),
             "",
