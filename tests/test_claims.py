@@ -326,7 +326,8 @@ def test_claim_status_from_its_clauses() -> None:
     bad = Clause("b", 3.0, "<=", 2.0, "-", "ours: b")
     assert ClaimResult.from_clauses("m", [ok, ok]).status == "reproduced"
     part = ClaimResult.from_clauses("m", [ok, bad])
-    assert part.status == "partly_reproduced" and part.measured == "m -- held (1 of 2): a -- not met: b"
+    assert part.status == "partly_reproduced"
+    assert part.measured == "m -- held (1 of 2): a -- not met: b"
     assert ClaimResult.from_clauses("m", [bad]).status == "not_reproduced"
     with pytest.raises(ConfigError):
         ClaimResult.from_clauses("m", [])
