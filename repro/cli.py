@@ -589,7 +589,11 @@ def _cmd_report(args: argparse.Namespace) -> int:
         raise ConfigError(f"--output {out} is a folder; give the report's file name")
     check_dir_arg(out.parent if str(out.parent) else Path("."), "--output's folder")
     notes = {key: root / "experiments" / key / "discussion.md" for key in registry.load_papers()}
-    result = render_report(args.results, args.figures, source_paths(), args.output, notes=notes)
+    from repro.sweep_ranges import ranges_rows
+
+    ranges = ranges_rows(list(registry.all_experiments(registry.load_papers())))
+    result = render_report(args.results, args.figures, source_paths(), args.output, notes=notes,
+                           ranges=ranges)
     print(f"wrote {result if result is not None else args.output}")
     return 0
 

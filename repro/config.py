@@ -72,8 +72,12 @@ def param(
     choices: tuple[str, ...] | None = None,
     help: str = "",
     output_only: bool = False,
+    sweep: Any = None,
 ) -> Any:
     """A ``dataclasses.field`` with ``default`` and metadata unit/range/choices/help.
+
+    ``sweep``: a :class:`repro.sweep_ranges.SweepRange`, the pre-registered plausible values
+    of a value the paper does not give (issue 19), inside ``range``.
 
     ``range`` is an inclusive ``(low, high)`` pair of finite numbers, required for
     every numeric field (``low_open=True``: ``low < value <= high``). Tuples, lists
@@ -107,6 +111,13 @@ def param(
         # Changes what a run writes (a video...), not its trace: left out of the config hash.
         metadata["output_only"] = True
     _check_value("default", default, metadata)
+    if sweep is not None:
+        from repro.sweep_ranges import SweepRange
+
+        if not isinstance(sweep, SweepRange):
+            raise ConfigError(f"param(sweep={sweep!r}) must be a SweepRange")
+        sweep.check_field(f"param({default!r})", metadata, default)
+        metadata["sweep"] = sweep
 
     if isinstance(default, (list, dict, set, tuple)) or type(default).__hash__ is None:
         factory = functools.partial(copy.deepcopy, default)
@@ -532,6 +543,8 @@ def _describe_meta(metadata: Any) -> str:
         parts.append(f"range {_metadata_range(metadata)}")
     if metadata.get("choices") is not None:
         parts.append("choices: " + ", ".join(str(c) for c in metadata["choices"]))
+    if metadata.get("sweep") is not None:
+        parts.append("swept: " + metadata["sweep"].describe())
     return "; ".join(parts)
 
 

@@ -432,9 +432,9 @@ def test_report(monkeypatch, tmp_path):
     seen: dict[str, Any] = {}
     fake_report = types.ModuleType("repro.runs.report")
 
-    def render_report(results_dir, figures_dir, source_paths, output, notes=None):
+    def render_report(results_dir, figures_dir, source_paths, output, notes=None, ranges=None):
         seen["args"] = (results_dir, figures_dir, list(source_paths), output)
-        seen["notes"] = notes
+        seen["notes"], seen["ranges"] = notes, ranges
         return output
 
     fake_report.render_report = render_report
@@ -451,6 +451,8 @@ def test_report(monkeypatch, tmp_path):
     assert all(p.suffix == ".py" for p in sources)
     # every registered paper may carry a discussion file next to its experiments
     assert all(path.name == "discussion.md" for path in seen["notes"].values())
+    # and its pre-registered sweep ranges (issue 19)
+    assert isinstance(seen["ranges"], dict)
 
 
 def test_python_dash_m_repro_help():

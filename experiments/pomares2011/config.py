@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from repro.config import param
+from repro.sweep_ranges import SweepRange
 
 EXPERIMENTS = ("exp1", "exp2")
 
@@ -36,11 +38,21 @@ class Pomares2011Config:
     arm_stop_px: float = param(1.0, unit="px", range=(0.01, 1000.0),
                                help="the PA-10 stops for good once the RVC error is under "
                                     "this (s_u* reached, Sec. 7.1)")  # ours: the paper runs "until the robotic manipulator achieves the corresponding desired features"; 1 px is 4x the detection error
-    omega_max: float = param(0.0, unit="rad/s", range=(0.0, 300.0),
-                             help="fastest mode of the mini-robot loop; 0: the rule (the "
-                                  "smaller of the 200 Hz feedback's 2 pi f / 20 and the "
-                                  "fastest mode whose first torque is within the limits)")  # ours: K_P, K_v "estimated by the user" (Sec. 3); the rule is in controller.Pomares2011Controller._gains (issue 17 item 11; was a fixed 60 rad/s)
-    zeta: float = param(1.0, range=(0.1, 5.0), help="damping ratio of every mode (ours)")  # ours: critical damping, no overshoot of the image features
+    omega_max: float = param(
+        0.0, unit="rad/s", range=(0.0, 300.0),
+        help="fastest mode of the mini-robot loop; 0: the rule (the smaller of the 200 Hz "
+             "feedback's 2 pi f / 20 and the fastest mode whose first torque is within the "
+             "limits)",
+        sweep=SweepRange(2 * math.pi * 200 / 60, 2 * math.pi * 200 / 10, dist="log-uniform",
+                         reason="K_P 'estimated by the user' (Sec. 3): the fastest mode "
+                                "between 1/60 and 1/10 of the 200 Hz feedback rate (2 pi 200 "
+                                "/ 60 to 2 pi 200 / 10 rad/s), the usual ratios of a digital "
+                                "servo loop; the default rule takes 1/20"))  # ours: K_P, K_v "estimated by the user" (Sec. 3); the rule is in controller.Pomares2011Controller._gains (issue 17 item 11; was a fixed 60 rad/s)
+    zeta: float = param(
+        1.0, range=(0.1, 5.0), help="damping ratio of every mode (ours)",
+        sweep=SweepRange(0.7, 1.5, reason="K_v 'estimated by the user' (Sec. 3): from the "
+                                          "common slightly under-damped tuning (0.7, ~5 % "
+                                          "overshoot) to clearly over-damped (1.5)"))  # ours: critical damping, no overshoot of the image features
     mini_controller: str = param("direct", choices=("direct", "indirect"),
                                  help="direct: torque-level hybrid VS (eq. 5); indirect: "
                                       "kinematic IBVS tracked by a joint PD (baseline)")
@@ -53,13 +65,23 @@ class Pomares2011Config:
                                      "(dist and its gradient held in between)")  # ours: a 100 Hz skeleton tracker (the paper's suit + UWB rate is not given)
     tracking_noise: float = param(0.0, unit="m", range=(0.0, 0.1),
                                   help="std of the tracker's noise on each skeleton joint")  # ours: 0 = the tracker reports the true skeleton (the paper's suit + UWB error is not given)
-    dmin: float = param(0.30, unit="m", range=(0.01, 2.0),
-                        help="d_min of eq. (17)")  # ours
-    avoid_omega: float = param(10.0, unit="rad/s", range=(0.1, 300.0),
-                               help="damping of every mode while the secondary task acts: "
-                                    "K_v = 2 zeta avoid_omega M")  # ours: the visual modes are 60, 1.7 and 0.1 rad/s at the start; without this the null-space push of (17) meets almost no damping and the camera spins away (measured: 3 rad/s, features lost in 1.7 s)
-    push_force: float = param(0.3, unit="N", range=(0.01, 50.0),
-                              help="virtual push at contact: alpha = F dmin / k_P")  # ours: a 0.3 N push at the closest point; measured in exp2: at 1 N the camera turns away and the dots leave the image 0.2 s after the human comes within dmin
+    dmin: float = param(
+        0.30, unit="m", range=(0.01, 2.0), help="d_min of eq. (17)",
+        sweep=SweepRange(0.2, 0.5, reason="d_min of (17) is not given: a protective "
+                                          "separation for a hand approaching at 1.6 m/s "
+                                          "(ISO 13855) over 0.12-0.3 s of reaction and "
+                                          "stopping"))  # ours
+    avoid_omega: float = param(
+        10.0, unit="rad/s", range=(0.1, 300.0),
+        help="damping of every mode while the secondary task acts: K_v = 2 zeta avoid_omega M",
+        sweep=SweepRange(3.0, 30.0, dist="log-uniform",
+                         reason="between twice the slowest visual mode at the start (1.7 "
+                                "rad/s) and half the fastest (60 rad/s)"))  # ours: the visual modes are 60, 1.7 and 0.1 rad/s at the start; without this the null-space push of (17) meets almost no damping and the camera spins away (measured: 3 rad/s, features lost in 1.7 s)
+    push_force: float = param(
+        0.3, unit="N", range=(0.01, 50.0), help="virtual push at contact: alpha = F dmin / k_P",
+        sweep=SweepRange(0.1, 1.0, dist="log-uniform",
+                         reason="1/30 to 1/3 of the force the weakest mini-robot joint (0.3 "
+                                "N m) exerts at the camera ~0.1 m away (3 N)"))  # ours: a 0.3 N push at the closest point; measured in exp2: at 1 N the camera turns away and the dots leave the image 0.2 s after the human comes within dmin
     log_every: int = param(10, range=(1, 100),
                            help="control steps between trace rows (a multiple of "
                                 "camera_period)")  # ours: 100 Hz rows of a 1 kHz loop keep a 25 s trace at ~5 MB

@@ -16,6 +16,7 @@ from repro.control.tactile_control import (
 from repro.errors import ConfigError
 from repro.geometry import make_T
 from repro.sim import barrett as B
+from repro.sweep_ranges import SweepRange
 
 PAPER = "pomares2011"
 EXPERIMENTS_EXP3 = ("exp3", "exp3_no_tactile")
@@ -60,12 +61,15 @@ class Exp3Config:
     # --- the cylinder and its contacts
     cylinder_radius: float = param(0.040, unit="m", range=(0.02, 0.08), help="cylinder radius")  # ours: an 80 mm cylinder; its fingertip contacts then land on the distal pads' last row (x_pad 17 mm, plan)
     cylinder_length: float = param(0.120, unit="m", range=(0.05, 0.30), help="cylinder length (along the hand's x)")  # ours: longer than the 69 mm span of fingers 1-2
-    cylinder_mass: float = param(0.5, unit="kg", range=(0.01, 2.0), help="cylinder mass")  # ours: a solid 80 x 120 mm cylinder of density 0.83 g/cm^3 (hard wood, polymer); within the 2 kg per finger (facts sheet)
+    cylinder_mass: float = param(0.5, unit="kg", range=(0.01, 2.0), help="cylinder mass",
+        sweep=SweepRange(0.1, 1.0, dist="log-uniform", reason="an 80 x 120 mm cylinder from thin-walled plastic (~0.1 kg) to solid dense polymer (1.2 g/cm^3: 0.72 kg), rounded up; under the BH8's 2 kg per finger"))  # ours: a solid 80 x 120 mm cylinder of density 0.83 g/cm^3 (hard wood, polymer); within the 2 kg per finger (facts sheet)
     palm_gap: float = param(0.005, unit="m", range=(0.0, 0.05), help="gap between the palm and the cylinder at the start (the approach's end)")  # ours: the approach stops 5 mm short of the object
-    friction: float = param(1.0, range=(0.05, 2.0), help="Coulomb friction coefficient of the cylinder against the hand and the support")  # ours: rubber on wood / plastic, static 1.0 (kinetic 0.9) in GraspIt's material table (src/material.cpp, from the CRC Handbook); PyBullet has one coefficient. The pads' cover material is not given
+    friction: float = param(1.0, range=(0.05, 2.0), help="Coulomb friction coefficient of the cylinder against the hand and the support",
+        sweep=SweepRange(0.5, 1.5, reason="dry rubber (the pads' skin) on wood or plastic: static coefficients of 0.5-1.5 in engineering tables; GraspIt's rubber table gives 1.0"))  # ours: rubber on wood / plastic, static 1.0 (kinetic 0.9) in GraspIt's material table (src/material.cpp, from the CRC Handbook); PyBullet has one coefficient. The pads' cover material is not given
     rolling_friction: float = param(1.0e-4, unit="m", range=(0.0, 0.01), help="PyBullet rolling friction of the cylinder (resisting torque / normal force)")  # ours: 0.1 mm, a small fraction of the ~2-3 mm contact width on a soft skin
     spinning_friction: float = param(1.0e-3, unit="m", range=(0.0, 0.01), help="PyBullet spinning (torsional) friction of the cylinder")  # ours: ~(2/3) mu a for a contact patch of radius a ~ 2.5 mm
-    contact_stiffness: float = param(2000.0, unit="N/m", range=(100.0, 1.0e6), help="PyBullet contact stiffness of each contact point of the cylinder")  # ours: 0.5 mm of skin compression per N and point: a ~2-3 mm elastomer skin over the pads (no PPS figure)
+    contact_stiffness: float = param(2000.0, unit="N/m", range=(100.0, 1.0e6), help="PyBullet contact stiffness of each contact point of the cylinder",
+        sweep=SweepRange(500.0, 20000.0, dist="log-uniform", reason="the pads' elastomer skin from soft (2 mm per N and contact point) to hard (0.05 mm per N); the default 0.5 mm per N"))  # ours: 0.5 mm of skin compression per N and point: a ~2-3 mm elastomer skin over the pads (no PPS figure)
     contact_damping: float = param(30.0, unit="N s/m", range=(0.1, 1.0e4), help="PyBullet contact damping of each contact point")  # ours: slightly over-damped: the 0.5 kg cylinder on ~6 such points is critically damped at 2 sqrt(6 k m) / 6 = 26 N s/m each
     # --- phase 1: automatic closing
     preshape_clearance_deg: float = param(3.0, unit="deg", range=(0.0, 30.0), help="the fingers start this far (proximal angle) before the planner's contact")  # ours: the approach leaves the fingers pre-shaped, a few mm from the object (grasp synthesis, Sec. 6)

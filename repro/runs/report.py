@@ -324,6 +324,19 @@ def _bench_table(bench: pd.DataFrame) -> str:
         "%), from one short run each.")
 
 
+def _ranges_section(rows: Sequence[Sequence[str]] | None) -> list[str]:
+    """The paper's pre-registered sweep ranges (issue 19), or that none is declared yet."""
+    from repro.sweep_ranges import RANGES_COLUMNS
+
+    out = ["### Pre-registered ranges of the values the paper leaves open", ""]
+    if not rows:
+        return out + ["_No sweep range declared yet._", ""]
+    return out + [
+        "Declared before any sweep that uses them (the commit is the one that last changed the "
+        "declaring line); a range narrowed after seeing results is said here.", "",
+        markdown_table(RANGES_COLUMNS, rows), ""]
+
+
 def _variation_note(results_dir: Path, paper: str) -> str:
     """One sentence on the measured machine-to-machine variation of the paper's clauses
     (results/clause_variation.csv), or that it was not measured."""
@@ -424,6 +437,7 @@ def render_report(
     papers: Sequence[str] | None = None,
     now: datetime | None = None,
     notes: Mapping[str, Path] | None = None,
+    ranges: Mapping[str, Sequence[Sequence[str]]] | None = None,
 ) -> Path:
     """Write REPORT.md at out_path from results_dir, figures_dir and the sources' ``# ours:``.
 
@@ -437,6 +451,8 @@ def render_report(
         now: unused (the report depends only on the results); kept for compatibility.
         notes: per paper, a Markdown file of discussion (why a claim did or did not
             reproduce, where the time goes) appended to that paper's section.
+        ranges: per paper, the rows of its pre-registered sweep ranges
+            (:func:`repro.sweep_ranges.ranges_rows`), listed in its section.
 
     Returns:
         out_path.
@@ -504,6 +520,7 @@ def render_report(
             bench=bench,
             ours=ours[owner == paper],
         )
+        lines += _ranges_section((ranges or {}).get(paper))
         note = (notes or {}).get(paper)
         if note is not None and Path(note).is_file():
             lines += ["### Discussion", "", Path(note).read_text(encoding="utf-8").strip(), ""]
