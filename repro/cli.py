@@ -131,6 +131,18 @@ def build_parser() -> argparse.ArgumentParser:
                         "the number of cores; 1: one after another in this process)")
     p.set_defaults(func=_cmd_results)
 
+    p = sub.add_parser("sweep", help="run quasi-random variants of an experiment's declared "
+                       "ranges and judge its claims on each (results/sweeps/<exp>/)")
+    _add_global_options(p, top_level=False)
+    p.add_argument("experiment", help="experiment id, e.g. pomares2011.exp3")
+    p.add_argument("--n", type=_positive_int, required=True, help="number of variants")
+    p.add_argument("--seed", type=int, default=0, help="seed of the Sobol sequence")
+    p.add_argument("--camera", choices=("exact", "render"), default="exact",
+                   help="camera mode of every variant (default: exact, for throughput)")
+    p.add_argument("--keep-traces", action="store_true",
+                   help="keep each variant's trace.csv (default: manifest, events, verdicts)")
+    p.set_defaults(func=_cmd_sweep)
+
     p = sub.add_parser("figures", help="draw figures and evaluate claims from the traces")
     _add_global_options(p, top_level=False)
     p.add_argument("--paper", metavar="P", default=None, help="only this paper")
@@ -577,6 +589,25 @@ def source_paths() -> list[Path]:
         if folder.is_dir():
             paths.extend(sorted(p for p in folder.rglob("*.py") if "__pycache__" not in p.parts))
     return paths
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from repro.runs.sweep import run_sweep
+
+    check_dir_arg(args.results, "--results")
+    failures = 0
+    with tqdm(total=args.n, desc="variants", unit="variant", file=sys.stderr,
+              disable=not sys.stderr.isatty()) as bar:
+        def done(row: dict[str, Any]) -> None:
+            nonlocal failures
+            failures += row.get("run_status") != "completed"
+            bar.set_postfix_str(f"failures {failures}")
+            bar.update(1)
+
+        path = run_sweep(args.experiment, args.n, args.seed, args.results, args.camera,
+                         args.keep_traces, on_done=done)
+    print(f"wrote {path} ({args.n} variants, {failures} failed runs)")
+    return 0
 
 
 def _cmd_report(args: argparse.Namespace) -> int:

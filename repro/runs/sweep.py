@@ -1,0 +1,217 @@
+"""Variant sweeps over the pre-registered ranges (issue 19, item 2): one experiment's claims
+judged on many plausible scenes.
+
+``run_sweep(exp_id, n, seed)`` draws ``n`` variants of the experiment's declared ranges
+(:func:`repro.sweep_ranges.sample_variants`), runs each as an ordinary run of the same
+runner into ``<results>/sweeps/<exp>/variants/<config hash>/`` (the same files as any run),
+judges there every claim that needs only this experiment, and writes the tidy table
+``<results>/sweeps/<exp>/variants.csv`` (one row per variant: its parameters, every clause's
+figure, margin and verdict, each claim's status, the run's status and wall time) with its
+column dictionary ``variants.columns.json``. A rerun skips the variants already judged
+(``verdicts.json`` beside a completed manifest) and reruns the others. The full trace is
+kept only with ``keep_traces``; the manifest, events and verdicts always.
+
+:func:`run_variant` is the unit of work: a pure function of its arguments, so that an
+engine other than the serial loop here (a Dask cluster) can map it over the variants.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import shutil
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from repro.errors import ConfigError, ReproError
+from repro.runs import registry
+from repro.runs.claims import Claim, ClaimResult, extent_note
+from repro.runs.registry import Experiment, Paper
+from repro.runs.trace import load_run
+from repro.sweep_ranges import declared_ranges, sample_variants
+
+__all__ = ["VERDICTS_FILE", "run_sweep", "run_variant", "sweep_claims", "variant_config"]
+
+VERDICTS_FILE = "verdicts.json"
+CAMERAS = ("exact", "render")
+
+
+def _experiment(exp_id: str, papers: Mapping[str, Paper] | None) -> tuple[Experiment, Paper]:
+    papers = registry.load_papers() if papers is None else papers
+    exp = registry.find_experiment(papers, exp_id)
+    return exp, papers[exp.paper]
+
+
+def sweep_claims(exp: Experiment, paper: Paper) -> list[Claim]:
+    """The paper's claims that need no run but ``exp`` (judged on each variant alone)."""
+    claims = list(paper.claims()) if paper.claims is not None else []
+    return [c for c in claims if tuple(c.runs) == (exp.name,)]
+
+
+def variant_config(exp: Experiment, overrides: Mapping[str, Any], camera: str | None) -> Any:
+    """The default config with ``overrides`` (and ``camera_mode=camera``), checked."""
+    config = exp.config_cls()
+    names = {f.name for f in dataclasses.fields(config)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ConfigError(f"{exp.id}: no config fields {unknown}")
+    changes = dict(overrides)
+    if camera is not None:
+        if camera not in CAMERAS:
+            raise ConfigError(f"--camera {camera!r}: choose one of {CAMERAS}")
+        if "camera_mode" in names:
+            changes["camera_mode"] = camera
+    config = dataclasses.replace(config, **changes)
+    registry.check_config(exp, config)
+    return config
+
+
+def _judge(claims: Sequence[Claim], run_dir: Path, name: str) -> dict[str, Any]:
+    """Every claim on the variant: status and clause figures (a check that raises is
+    recorded as ``not_run`` with its error, not lost)."""
+    runs = {name: load_run(run_dir)}
+    out: dict[str, Any] = {}
+    for claim in claims:
+        try:
+            res = claim.check(runs)
+        except Exception as exc:  # one broken variant must not end the sweep
+            out[claim.claim] = {"status": "not_run", "error": f"{type(exc).__name__}: {exc}",
+                                "clauses": []}
+            continue
+        if not isinstance(res, ClaimResult):
+            raise ReproError(f"claim {claim.claim}: check returned {type(res).__name__}")
+        _, cut_short = extent_note(runs, claim.whole_run, claim.done_events)
+        status = ("not_reproduced" if cut_short and res.status != "not_reproduced"
+                  else res.status)
+        out[claim.claim] = {"status": status, "clauses": [
+            {"name": c.name, "measured": c.measured, "margin": c.margin, "holds": c.holds,
+             "evidence": c.evidence} for c in res.clauses]}
+    return out
+
+
+def _outputs_off(config: Any) -> Any:
+    """``config`` with its output-only fields (snapshots, videos: not in the config hash)
+    set to 0 / False: a variant without its trace writes no pictures either."""
+    off = {f.name: (False if isinstance(getattr(config, f.name), bool) else 0)
+           for f in dataclasses.fields(config) if f.metadata.get("output_only")
+           and isinstance(getattr(config, f.name), (bool, int, float))}
+    return dataclasses.replace(config, **off) if off else config
+
+
+#: What a variant keeps without ``keep_traces``: the judged verdicts and the run's record.
+_BULKY = ("trace.csv", "frames", "pressure_images.npz", "video.gif", "video.mp4")
+
+
+def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: str | None,
+                sweep_dir: Path, keep_traces: bool = False,
+                papers: Mapping[str, Paper] | None = None) -> dict[str, Any]:
+    """Run (or, if already judged, read) variant ``index`` and return its row."""
+    exp, paper = _experiment(exp_id, papers)
+    config = variant_config(exp, overrides, camera)
+    if not keep_traces:
+        config = _outputs_off(config)
+    chash = registry.compute_config_hash(config)
+    run_dir = Path(sweep_dir) / "variants" / chash[:12]
+    verdicts_path = run_dir / VERDICTS_FILE
+    if verdicts_path.is_file():
+        done = json.loads(verdicts_path.read_text(encoding="utf-8"))
+        if done.get("config_hash") == chash:
+            return dict(done["row"])
+    tic = time.perf_counter()
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    status, reason = "completed", ""
+    try:
+        registry.run_experiment(exp, config, run_dir)
+        manifest = json.loads((run_dir / "manifest.json").read_text(encoding="utf-8"))
+        status, reason = str(manifest.get("status")), str(manifest.get("reason", ""))
+        verdicts = _judge(sweep_claims(exp, paper), run_dir, exp.name)
+    except Exception as exc:  # a crashed variant is a row, not a lost sweep (^C still stops)
+        status, reason, verdicts = "failed", f"{type(exc).__name__}: {exc}", {}
+    row: dict[str, Any] = {"variant": index, "config_hash": chash[:12], "run_status": status,
+                           "run_reason": reason,
+                           "wall_time_s": round(time.perf_counter() - tic, 3)}
+    row.update({f"p.{k}": v for k, v in overrides.items()})
+    for cid, v in verdicts.items():
+        row[f"claim{cid}.status"] = v["status"]
+        for k, c in enumerate(v["clauses"], start=1):
+            for what in ("measured", "margin", "holds"):
+                row[f"claim{cid}.c{k}.{what}"] = c[what]
+    if not keep_traces:
+        for name in _BULKY:
+            path = run_dir / name
+            if path.is_dir():
+                shutil.rmtree(path)
+            else:
+                path.unlink(missing_ok=True)
+    verdicts_path.write_text(json.dumps({"config_hash": chash, "row": row,
+                                         "verdicts": verdicts}, indent=1, default=_json),
+                             encoding="utf-8")
+    return row
+
+
+def _json(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    if hasattr(x, "item"):
+        return x.item()
+    return str(x)
+
+
+def _columns(exp: Experiment, paper: Paper) -> dict[str, dict[str, str]]:
+    """The column dictionary of variants.csv."""
+    cols = {
+        "variant": {"unit": "-", "definition": "index in the seeded Sobol sequence"},
+        "config_hash": {"unit": "text", "definition": "first 12 hex digits of the variant's "
+                        "config hash (its run folder under variants/)"},
+        "run_status": {"unit": "text", "definition": "the run's manifest status, or failed"},
+        "run_reason": {"unit": "text", "definition": "the manifest's reason, or the error"},
+        "wall_time_s": {"unit": "s", "definition": "wall time of the run and its judging"},
+    }
+    defaults = exp.config_cls()
+    for f in dataclasses.fields(defaults):
+        rng = f.metadata.get("sweep")
+        if rng is not None:
+            cols[f"p.{f.name}"] = {"unit": f.metadata.get("unit", "-"), "definition":
+                                   f"{f.metadata.get('help', f.name)}: {rng.describe()}"}
+    for claim in sweep_claims(exp, paper):
+        cols[f"claim{claim.claim}.status"] = {"unit": "text", "definition":
+                                              f"claim {claim.claim}: {claim.description}"}
+        cols[f"claim{claim.claim}.c<k>.measured|margin|holds"] = {
+            "unit": "clause's", "definition": f"clause k of claim {claim.claim} (names in "
+            f"each variant's {VERDICTS_FILE}): its figure, signed margin, verdict"}
+    return cols
+
+
+def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | None = "exact",
+              keep_traces: bool = False, papers: Mapping[str, Paper] | None = None,
+              on_done: Callable[[dict[str, Any]], None] | None = None) -> Path:
+    """Run ``n`` variants of ``exp_id`` one after another in this process; write
+    variants.csv and its column dictionary; return the CSV's path."""
+    exp, paper = _experiment(exp_id, papers)
+    if not declared_ranges(exp.config_cls):
+        raise ConfigError(f"{exp.id} declares no sweep range (repro.sweep_ranges)")
+    if not sweep_claims(exp, paper):
+        raise ConfigError(f"{exp.id}: no claim of {exp.paper} needs only this run")
+    variants = sample_variants(exp.config_cls, n, seed)
+    sweep_dir = Path(results_dir) / "sweeps" / exp.name
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for i, overrides in enumerate(variants):
+        row = run_variant(exp.id, i, overrides, camera, sweep_dir, keep_traces, papers)
+        rows.append(row)
+        if on_done is not None:
+            on_done(row)
+    table = pd.DataFrame(rows)
+    path = sweep_dir / "variants.csv"
+    tmp = path.with_name(path.name + ".tmp")
+    table.to_csv(tmp, index=False, float_format="%.10g")
+    tmp.replace(path)
+    (sweep_dir / "variants.columns.json").write_text(
+        json.dumps({"experiment": exp.id, "n": n, "seed": seed, "camera": camera,
+                    "columns": _columns(exp, paper)}, indent=1) + "\n", encoding="utf-8")
+    return path

@@ -1,0 +1,156 @@
+"""Variant sweeps (repro/runs/sweep.py, issue 19 item 2) on a fake paper whose one claim has
+a known answer per variant: the variants are the seeded Sobol samples, each an ordinary run
+judged alone, the table says each clause's figure and verdict, reruns skip what was judged,
+and a failing variant is a row, not a lost sweep."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+from runfiles import complete_run_files
+
+from repro import cli
+from repro.config import param
+from repro.errors import ConfigError, SolverError
+from repro.runs import registry
+from repro.runs.claims import Claim, ClaimResult, Clause
+from repro.runs.registry import Experiment, Paper
+from repro.runs.sweep import VERDICTS_FILE, run_sweep, variant_config
+from repro.runs.trace import RunFiles
+from repro.sweep_ranges import SweepRange, sample_variants
+
+BOUND = 1.0  # the claim: the error stays under 1 (holds for gain < 0.5)
+
+
+@dataclass(frozen=True)
+class GainCfg:
+    gain: float = param(0.3, range=(0.0, 2.0), help="a gain",
+                        sweep=SweepRange(0.1, 0.9, reason="a range written down first"))
+    camera_mode: str = param("render", choices=("render", "exact"))
+    snapshots: float = param(0.5, range=(0.0, 10.0), output_only=True)
+    fail_above: float = param(2.0, range=(0.0, 2.0), help="test hook: fail for gain above")
+
+
+class Runner:
+    def __init__(self) -> None:
+        self.calls: list[GainCfg] = []
+
+    def __call__(self, config: GainCfg, out_dir: Path) -> Path:
+        self.calls.append(config)
+        if config.gain > config.fail_above:
+            raise SolverError(f"no solution at gain {config.gain}")
+        out_dir.mkdir(parents=True, exist_ok=True)
+        t = np.arange(5) * 0.1
+        pd.DataFrame({"t": t, "err": 2.0 * config.gain * np.ones(5)}).to_csv(
+            out_dir / "trace.csv", index=False)
+        (out_dir / "events.csv").write_text("t,step,kind,detail\n")
+        (out_dir / "manifest.json").write_text(json.dumps({
+            "experiment": "case", "paper": "fake", "status": "completed", "n_rows": 5,
+            "config": {"duration": 0.4}, "summary": {},
+            "config_hash": registry.compute_config_hash(config)}))
+        complete_run_files(out_dir)
+        if config.snapshots > 0:
+            (out_dir / "frames").mkdir(exist_ok=True)
+        return out_dir
+
+
+def _check(runs: dict[str, RunFiles]) -> ClaimResult:
+    err = float(runs["case"].trace["err"].max())
+    return ClaimResult.from_clauses(f"max error {err:.2f}", [
+        Clause("the error stays under 1", err, "<", BOUND, "-", "paper: 'under 1'")])
+
+
+def _papers(runner: Runner) -> dict[str, Paper]:
+    exp = Experiment(name="case", paper="fake", description="a case", config_cls=GainCfg,
+                     run=runner)
+    other = Experiment(name="other", paper="fake", description="needs two runs",
+                       config_cls=GainCfg, run=runner)
+    claims = (Claim("fake", "1", "error under 1", "< 1", ("case",), _check),
+              Claim("fake", "2", "two runs", "-", ("case", "other"), _check))
+    return {"fake": Paper(key="fake", experiments=(exp, other), claims=lambda: claims)}
+
+
+def test_a_sweep_judges_every_variant_and_resumes(tmp_path: Path) -> None:
+    runner = Runner()
+    papers = _papers(runner)
+    path = run_sweep("fake.case", 8, seed=2, results_dir=tmp_path, papers=papers)
+    df = pd.read_csv(path)
+    want = [v["gain"] for v in sample_variants(GainCfg, 8, seed=2)]
+    np.testing.assert_allclose(df["p.gain"], want, rtol=1e-9)
+    assert len(runner.calls) == 8 and {c.camera_mode for c in runner.calls} == {"exact"}
+    assert all(c.snapshots == 0.0 for c in runner.calls)  # outputs off without traces
+    # the known answer: the clause holds iff 2 gain < 1; claim 2 needs another run: not here
+    np.testing.assert_allclose(df["claim1.c1.measured"], 2.0 * np.asarray(want))
+    assert list(df["claim1.c1.holds"]) == [2 * g < BOUND for g in want]
+    assert list(df["claim1.status"]) == ["reproduced" if 2 * g < BOUND else "not_reproduced"
+                                         for g in want]
+    assert "claim2.status" not in df.columns
+    np.testing.assert_allclose(df["claim1.c1.margin"], BOUND - 2.0 * np.asarray(want))
+    cols = json.loads((path.parent / "variants.columns.json").read_text())
+    assert set(cols["columns"]) >= {"variant", "p.gain", "claim1.status"}
+    assert "a range written down first" in cols["columns"]["p.gain"]["definition"]
+    # the variants' folders: manifest, events, verdicts; no trace, no frames
+    dirs = sorted((path.parent / "variants").iterdir())
+    assert len(dirs) == 8 and all((d / VERDICTS_FILE).is_file() for d in dirs)
+    assert not any((d / "trace.csv").exists() or (d / "frames").exists() for d in dirs)
+    # a rerun judges nothing again; a variant without its verdicts is rerun alone
+    (dirs[3] / VERDICTS_FILE).unlink()
+    again = pd.read_csv(run_sweep("fake.case", 8, seed=2, results_dir=tmp_path, papers=papers))
+    assert len(runner.calls) == 9
+    pd.testing.assert_frame_equal(again.drop(columns="wall_time_s"),
+                                  df.drop(columns="wall_time_s"))
+
+
+def test_traces_are_kept_when_asked_and_failures_are_rows(tmp_path: Path) -> None:
+    runner = Runner()
+    path = run_sweep("fake.case", 4, seed=0, results_dir=tmp_path, keep_traces=True,
+                     papers=_papers(runner))
+    assert all((d / "trace.csv").is_file() for d in (path.parent / "variants").iterdir())
+
+    @dataclass(frozen=True)
+    class Failing(GainCfg):
+        fail_above: float = param(0.5, range=(0.0, 2.0))
+
+    papers = _papers(runner)
+    other = papers["fake"].experiments[1]
+    papers["fake"] = Paper(key="fake", experiments=(Experiment(
+        name="case", paper="fake", description="fails", config_cls=Failing, run=runner),
+        other), claims=papers["fake"].claims)
+    df = pd.read_csv(run_sweep("fake.case", 8, seed=1, results_dir=tmp_path / "f",
+                               papers=papers))
+    failed = df["run_status"] == "failed"
+    assert list(failed) == list(df["p.gain"] > 0.5) and failed.any() and not failed.all()
+    assert df.loc[failed, "run_reason"].str.contains("no solution").all()
+    assert df.loc[failed, "claim1.status"].isna().all()
+
+
+def test_bad_sweeps_are_refused(tmp_path: Path) -> None:
+    papers = _papers(Runner())
+    exp = papers["fake"].experiments[0]
+    with pytest.raises(ConfigError, match="no config fields"):
+        variant_config(exp, {"nope": 1.0}, None)
+    with pytest.raises(ConfigError, match="out of range"):
+        variant_config(exp, {"gain": 5.0}, None)
+    with pytest.raises(ConfigError, match="--camera"):
+        variant_config(exp, {}, "fisheye")
+    with pytest.raises(ConfigError, match="needs only this run"):
+        run_sweep("fake.other", 2, 0, tmp_path, papers={"fake": Paper(
+            key="fake", experiments=papers["fake"].experiments,
+            claims=lambda: (papers["fake"].claims() or ())[1:])})
+
+
+def test_the_cli_sweeps_and_reports(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    runner = Runner()
+    monkeypatch.setattr(registry, "load_papers", lambda: _papers(runner))
+    code = cli.main(["sweep", "fake.case", "--n", "3", "--results", str(tmp_path)])
+    out: Any = capsys.readouterr().out
+    assert code == 0 and "3 variants, 0 failed runs" in out
+    assert (tmp_path / "sweeps" / "case" / "variants.csv").is_file()
+    assert cli.main(["sweep", "fake.case", "--n", "0", "--results", str(tmp_path)]) == 2
