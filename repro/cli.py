@@ -141,6 +141,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="camera mode of every variant (default: exact, for throughput)")
     p.add_argument("--keep-traces", action="store_true",
                    help="keep each variant's trace.csv (default: manifest, events, verdicts)")
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="run on an existing Dask cluster (tcp://host:port); default: a "
+                        "LocalCluster of one single-threaded worker process per core")
+    p.add_argument("-j", "--workers", type=_positive_int, default=None, metavar="N",
+                   help="LocalCluster workers (default: the number of cores)")
+    p.add_argument("--serial", action="store_true",
+                   help="no Dask: the variants one after another in this process")
     p.set_defaults(func=_cmd_sweep)
 
     p = sub.add_parser("figures", help="draw figures and evaluate claims from the traces")
@@ -605,7 +612,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             bar.update(1)
 
         path = run_sweep(args.experiment, args.n, args.seed, args.results, args.camera,
-                         args.keep_traces, on_done=done)
+                         args.keep_traces, on_done=done,
+                         engine="serial" if args.serial else "dask",
+                         scheduler=args.scheduler, workers=args.workers)
     print(f"wrote {path} ({args.n} variants, {failures} failed runs)")
     return 0
 

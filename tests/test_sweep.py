@@ -149,8 +149,53 @@ def test_the_cli_sweeps_and_reports(tmp_path: Path, monkeypatch: pytest.MonkeyPa
                                     capsys: pytest.CaptureFixture[str]) -> None:
     runner = Runner()
     monkeypatch.setattr(registry, "load_papers", lambda: _papers(runner))
-    code = cli.main(["sweep", "fake.case", "--n", "3", "--results", str(tmp_path)])
+    code = cli.main(["sweep", "fake.case", "--n", "3", "--results", str(tmp_path), "--serial"])
     out: Any = capsys.readouterr().out
     assert code == 0 and "3 variants, 0 failed runs" in out
     assert (tmp_path / "sweeps" / "case" / "variants.csv").is_file()
-    assert cli.main(["sweep", "fake.case", "--n", "0", "--results", str(tmp_path)]) == 2
+    assert cli.main(["sweep", "fake.case", "--n", "0", "--results", str(tmp_path),
+                     "--serial"]) == 2
+
+
+# ----------------------------------------------------------------- the Dask engine
+def _by_value() -> None:
+    """Workers are fresh processes that cannot import this test module: ship its fake
+    configs and runners by value."""
+    import sys
+
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+
+class KillOnce(Runner):
+    """Kills its worker process the first time it meets the variant with ``gain`` closest
+    to ``target`` (a marker file says it happened)."""
+
+    def __init__(self, marker: Path, target: float) -> None:
+        super().__init__()
+        self.marker, self.target = marker, target
+
+    def __call__(self, config: GainCfg, out_dir: Path) -> Path:
+        if abs(config.gain - self.target) < 1e-12 and not self.marker.exists():
+            self.marker.write_text("killed")
+            import os
+
+            os._exit(1)  # the worker dies mid-variant
+        return super().__call__(config, out_dir)
+
+
+def test_dask_gives_the_serial_table_and_survives_a_killed_worker(tmp_path: Path) -> None:
+    _by_value()
+    serial = pd.read_csv(run_sweep("fake.case", 6, seed=5, results_dir=tmp_path / "s",
+                                   papers=_papers(Runner())))
+    target = sample_variants(GainCfg, 6, seed=5)[2]["gain"]
+    runner = KillOnce(tmp_path / "killed", target)
+    path = run_sweep("fake.case", 6, seed=5, results_dir=tmp_path / "d",
+                     papers=_papers(runner), engine="dask", workers=2)
+    dask = pd.read_csv(path)
+    assert (tmp_path / "killed").read_text() == "killed"  # a worker did die
+    pd.testing.assert_frame_equal(dask.drop(columns="wall_time_s"),
+                                  serial.drop(columns="wall_time_s"))
+    assert sorted(dask["variant"]) == list(range(6))  # nothing lost, nothing twice
+    assert len(list((path.parent / "variants").iterdir())) == 6

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import shutil
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -39,6 +40,7 @@ __all__ = ["VERDICTS_FILE", "run_sweep", "run_variant", "sweep_claims", "variant
 
 VERDICTS_FILE = "verdicts.json"
 CAMERAS = ("exact", "render")
+ENGINES = ("serial", "dask")
 
 
 def _experiment(exp_id: str, papers: Mapping[str, Paper] | None) -> tuple[Experiment, Paper]:
@@ -121,7 +123,7 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
     if verdicts_path.is_file():
         done = json.loads(verdicts_path.read_text(encoding="utf-8"))
         if done.get("config_hash") == chash:
-            return dict(done["row"])
+            return {**done["row"], "variant": index}
     tic = time.perf_counter()
     run_dir.parent.mkdir(parents=True, exist_ok=True)
     status, reason = "completed", ""
@@ -187,11 +189,48 @@ def _columns(exp: Experiment, paper: Paper) -> dict[str, dict[str, str]]:
     return cols
 
 
+def _map_dask(exp_id: str, variants: Sequence[Mapping[str, Any]], camera: str | None,
+              sweep_dir: Path, keep_traces: bool, papers: Mapping[str, Paper] | None,
+              scheduler: str | None, workers: int | None,
+              on_done: Callable[[dict[str, Any]], None] | None) -> list[dict[str, Any]]:
+    """The variants on Dask distributed: an existing cluster at ``scheduler``, or a
+    LocalCluster of ``workers`` processes (default: one per core), one thread each, on
+    loopback. A variant whose worker dies is rerun by the scheduler (its folder is
+    rewritten: nothing lost, nothing duplicated); rows come back where this runs."""
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                               processes=True, host="127.0.0.1", dashboard_address=None)
+    client = Client(cluster if cluster is not None else scheduler)
+    try:
+        futures = {client.submit(run_variant, exp_id, i, dict(ov), camera, Path(sweep_dir),
+                                 keep_traces, papers, key=f"variant-{i}-{exp_id}",
+                                 pure=False, retries=1): i for i, ov in enumerate(variants)}
+        rows: dict[int, dict[str, Any]] = {}
+        for fut in as_completed(futures):
+            row = fut.result()
+            rows[futures[fut]] = row
+            if on_done is not None:
+                on_done(row)
+        return [rows[i] for i in range(len(variants))]
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
 def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | None = "exact",
               keep_traces: bool = False, papers: Mapping[str, Paper] | None = None,
-              on_done: Callable[[dict[str, Any]], None] | None = None) -> Path:
-    """Run ``n`` variants of ``exp_id`` one after another in this process; write
-    variants.csv and its column dictionary; return the CSV's path."""
+              on_done: Callable[[dict[str, Any]], None] | None = None,
+              engine: str = "serial", scheduler: str | None = None,
+              workers: int | None = None) -> Path:
+    """Run ``n`` variants of ``exp_id`` (``engine``: "serial", one after another in this
+    process, or "dask", on Dask distributed: :func:`_map_dask`); write variants.csv and its
+    column dictionary; return the CSV's path."""
+    if engine not in ENGINES:
+        raise ConfigError(f"sweep engine {engine!r}: choose one of {ENGINES}")
     exp, paper = _experiment(exp_id, papers)
     if not declared_ranges(exp.config_cls):
         raise ConfigError(f"{exp.id} declares no sweep range (repro.sweep_ranges)")
@@ -200,12 +239,16 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
     variants = sample_variants(exp.config_cls, n, seed)
     sweep_dir = Path(results_dir) / "sweeps" / exp.name
     sweep_dir.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for i, overrides in enumerate(variants):
-        row = run_variant(exp.id, i, overrides, camera, sweep_dir, keep_traces, papers)
-        rows.append(row)
-        if on_done is not None:
-            on_done(row)
+    if engine == "dask":
+        rows = _map_dask(exp.id, variants, camera, sweep_dir, keep_traces, papers, scheduler,
+                         workers, on_done)
+    else:
+        rows = []
+        for i, overrides in enumerate(variants):
+            row = run_variant(exp.id, i, overrides, camera, sweep_dir, keep_traces, papers)
+            rows.append(row)
+            if on_done is not None:
+                on_done(row)
     table = pd.DataFrame(rows)
     path = sweep_dir / "variants.csv"
     tmp = path.with_name(path.name + ".tmp")
@@ -213,5 +256,6 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
     tmp.replace(path)
     (sweep_dir / "variants.columns.json").write_text(
         json.dumps({"experiment": exp.id, "n": n, "seed": seed, "camera": camera,
+                    "engine": engine,
                     "columns": _columns(exp, paper)}, indent=1) + "\n", encoding="utf-8")
     return path
