@@ -6,6 +6,7 @@ and a failing variant is a row, not a lost sweep."""
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,7 @@ from runfiles import complete_run_files
 
 from repro import cli
 from repro.config import param
-from repro.errors import ConfigError, SolverError
+from repro.errors import ConfigError, ReproError, SolverError
 from repro.runs import registry
 from repro.runs.claims import Claim, ClaimResult, Clause
 from repro.runs.registry import Experiment, Paper
@@ -199,3 +200,35 @@ def test_dask_gives_the_serial_table_and_survives_a_killed_worker(tmp_path: Path
                                   serial.drop(columns="wall_time_s"))
     assert sorted(dask["variant"]) == list(range(6))  # nothing lost, nothing twice
     assert len(list((path.parent / "variants").iterdir())) == 6
+
+
+# ----------------------------------------------------------------- rates
+def test_wilson_interval_known_values() -> None:
+    from repro.runs.sweep_rates import wilson_interval
+
+    lo, hi = wilson_interval(8, 10)  # the textbook example: 0.490-0.943
+    assert lo == pytest.approx(0.4902, abs=1e-4) and hi == pytest.approx(0.9433, abs=1e-4)
+    assert wilson_interval(0, 10)[0] == 0.0 and wilson_interval(10, 10)[1] == 1.0
+    assert all(math.isnan(x) for x in wilson_interval(0, 0))
+    with pytest.raises(ReproError):
+        wilson_interval(11, 10)
+
+
+def test_rates_count_the_variants_with_their_interval(tmp_path: Path) -> None:
+    import csv
+
+    (tmp_path / "claims.csv").write_text("paper,claim,status\nfake,1,reproduced\n")
+    with open(tmp_path / "claim_clauses.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["paper", "claim", "clause", "holds"])
+        w.writerow(["fake", "1", "the error stays under 1", "True"])
+    path = run_sweep("fake.case", 16, seed=0, results_dir=tmp_path, papers=_papers(Runner()))
+    rates = pd.read_csv(path.parent / "rates.csv")
+    gains = np.array([v["gain"] for v in sample_variants(GainCfg, 16, seed=0)])
+    k = int((2 * gains < BOUND).sum())
+    claim = rates[rates["clause"].isna()].iloc[0]
+    assert (claim["variants"], claim["held"]) == (16, k) and claim["canonical"] == "reproduced"
+    assert claim["rate"] == pytest.approx(k / 16)
+    assert claim["wilson_low"] < k / 16 < claim["wilson_high"]
+    clause = rates[rates["clause"] == "the error stays under 1"].iloc[0]
+    assert clause["held"] == k and clause["canonical"] == "holds"

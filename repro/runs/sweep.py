@@ -258,4 +258,7 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
         json.dumps({"experiment": exp.id, "n": n, "seed": seed, "camera": camera,
                     "engine": engine,
                     "columns": _columns(exp, paper)}, indent=1) + "\n", encoding="utf-8")
+    from repro.runs.sweep_rates import write_rates
+
+    write_rates(sweep_dir, Path(results_dir), exp.paper, exp.name)
     return path

@@ -1,0 +1,97 @@
+"""How often each claim and clause holds over a sweep's variants (issue 19, item 4):
+``<results>/sweeps/<exp>/rates.csv`` from ``variants.csv`` and the variants' verdicts.
+
+One row per claim (``clause`` empty: the claim reproduced) and per clause (the clause held):
+variants judged, how many held, the rate, its Wilson 95 % interval, and the canonical run's
+verdict from results/claims.csv and results/claim_clauses.csv. Failed runs are not judged
+variants; they are counted apart.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pandas as pd
+
+from repro.errors import ReproError
+
+__all__ = ["RATES_COLUMNS", "wilson_interval", "write_rates"]
+
+RATES_COLUMNS = ("experiment", "claim", "clause", "variants", "held", "rate", "wilson_low",
+                 "wilson_high", "failed_runs", "canonical")
+Z95 = 1.959963984540054  # the two-sided 95 % normal quantile
+
+
+def wilson_interval(k: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """The Wilson score interval of a binomial rate ``k / n`` (NaN, NaN for n = 0)."""
+    if n <= 0:
+        return math.nan, math.nan
+    if not 0 <= k <= n:
+        raise ReproError(f"wilson_interval: k = {k} outside [0, {n}]")
+    p = k / n
+    den = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / den
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    lo, hi = max(0.0, centre - half), min(1.0, centre + half)
+    return (0.0 if k == 0 else lo), (1.0 if k == n else hi)  # exact ends, no round-off
+
+
+def _clause_names(sweep_dir: Path) -> dict[tuple[str, int], str]:
+    """(claim, k) -> clause name, from the variants' verdicts."""
+    names: dict[tuple[str, int], str] = {}
+    for path in sorted((sweep_dir / "variants").glob("*/verdicts.json")):
+        verdicts = json.loads(path.read_text(encoding="utf-8")).get("verdicts", {})
+        for cid, v in verdicts.items():
+            for k, c in enumerate(v.get("clauses", []), start=1):
+                names.setdefault((cid, k), c["name"])
+    return names
+
+
+def _canonical(results_dir: Path, paper: str) -> tuple[dict[str, str], dict[tuple[str, str], str]]:
+    claims: dict[str, str] = {}
+    clauses: dict[tuple[str, str], str] = {}
+    path = results_dir / "claims.csv"
+    if path.is_file():
+        df = pd.read_csv(path, dtype=str, keep_default_na=False)
+        claims = {r.claim: r.status for r in df[df["paper"] == paper].itertuples()}
+    path = results_dir / "claim_clauses.csv"
+    if path.is_file():
+        df = pd.read_csv(path, dtype=str, keep_default_na=False)
+        clauses = {(r.claim, r.clause): ("holds" if r.holds == "True" else "fails")
+                   for r in df[df["paper"] == paper].itertuples()}
+    return claims, clauses
+
+
+def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str) -> Path:
+    """Write ``sweep_dir / rates.csv`` from ``sweep_dir / variants.csv``; return its path."""
+    sweep_dir, results_dir = Path(sweep_dir), Path(results_dir)
+    df = pd.read_csv(sweep_dir / "variants.csv")
+    judged = df[df["run_status"] != "failed"]
+    failed = int((df["run_status"] == "failed").sum())
+    names = _clause_names(sweep_dir)
+    canon_claims, canon_clauses = _canonical(results_dir, paper)
+    rows = []
+    claim_ids = sorted({c.split(".", 1)[0][len("claim"):] for c in df.columns
+                        if c.startswith("claim") and c.endswith(".status")})
+    for cid in claim_ids:
+        st = judged[f"claim{cid}.status"].dropna().astype(str)
+        k = int((st == "reproduced").sum())
+        lo, hi = wilson_interval(k, len(st))
+        rows.append((experiment, cid, "", len(st), k, k / len(st) if len(st) else math.nan,
+                     lo, hi, failed, canon_claims.get(cid, "")))
+        j = 1
+        while f"claim{cid}.c{j}.holds" in df.columns:
+            col = judged[f"claim{cid}.c{j}.holds"].dropna()
+            held = col.astype(str).str.lower().eq("true")
+            k, n = int(held.sum()), int(len(col))
+            lo, hi = wilson_interval(k, n)
+            name = names.get((cid, j), f"clause {j}")
+            rows.append((experiment, cid, name, n, k, k / n if n else math.nan, lo, hi, failed,
+                         canon_clauses.get((cid, name), "")))
+            j += 1
+    out = sweep_dir / "rates.csv"
+    pd.DataFrame(rows, columns=list(RATES_COLUMNS)).to_csv(out, index=False,
+                                                           float_format="%.6g")
+    return out
