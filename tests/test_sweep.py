@@ -99,7 +99,8 @@ def test_a_sweep_judges_every_variant_and_resumes(tmp_path: Path) -> None:
     # the variants' folders: manifest, events, verdicts; no trace, no frames
     dirs = sorted((path.parent / "variants").iterdir())
     assert len(dirs) == 8 and all((d / VERDICTS_FILE).is_file() for d in dirs)
-    assert not any((d / "trace.csv").exists() or (d / "frames").exists() for d in dirs)
+    assert all(sorted(p.name for p in d.iterdir()) == ["events.csv", "manifest.json",
+                                                        VERDICTS_FILE] for d in dirs)
     # a rerun judges nothing again; a variant without its verdicts is rerun alone
     (dirs[3] / VERDICTS_FILE).unlink()
     again = pd.read_csv(run_sweep("fake.case", 8, seed=2, results_dir=tmp_path, papers=papers))

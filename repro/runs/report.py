@@ -197,7 +197,8 @@ def _discover_papers(
         papers.update(
             d.name
             for d in results_dir.iterdir()
-            if d.is_dir() and not d.name.startswith(".") and any(d.rglob("manifest.json"))
+            if d.is_dir() and not d.name.startswith(".") and d.name != "sweeps"
+            and any(d.rglob("manifest.json"))
         )
     if figures_dir.is_dir():
         papers.update(

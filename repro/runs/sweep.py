@@ -36,7 +36,8 @@ from repro.runs.registry import Experiment, Paper
 from repro.runs.trace import load_run
 from repro.sweep_ranges import declared_ranges, sample_variants
 
-__all__ = ["VERDICTS_FILE", "run_sweep", "run_variant", "sweep_claims", "variant_config"]
+__all__ = ["SWEEPS_DIR", "VERDICTS_FILE", "run_sweep", "run_variant", "sweep_claims",
+           "variant_config"]
 
 VERDICTS_FILE = "verdicts.json"
 CAMERAS = ("exact", "render")
@@ -105,8 +106,12 @@ def _outputs_off(config: Any) -> Any:
     return dataclasses.replace(config, **off) if off else config
 
 
-#: What a variant keeps without ``keep_traces``: the judged verdicts and the run's record.
-_BULKY = ("trace.csv", "frames", "pressure_images.npz", "video.gif", "video.mp4")
+#: What a variant keeps without ``keep_traces``: the judged verdicts and the run's record
+#: (its manifest and events); the trace and everything that only serves to read or rebuild
+#: it (columns, scene, URDF copies, snapshots) go.
+_KEEP = ("manifest.json", "events.csv", VERDICTS_FILE)
+#: The folder of the sweeps under the results folder (not a paper).
+SWEEPS_DIR = "sweeps"
 
 
 def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: str | None,
@@ -143,16 +148,13 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
         for k, c in enumerate(v["clauses"], start=1):
             for what in ("measured", "margin", "holds"):
                 row[f"claim{cid}.c{k}.{what}"] = c[what]
-    if not keep_traces:
-        for name in _BULKY:
-            path = run_dir / name
-            if path.is_dir():
-                shutil.rmtree(path)
-            else:
-                path.unlink(missing_ok=True)
     verdicts_path.write_text(json.dumps({"config_hash": chash, "row": row,
                                          "verdicts": verdicts}, indent=1, default=_json),
                              encoding="utf-8")
+    if not keep_traces:
+        for path in run_dir.iterdir():
+            if path.name not in _KEEP:
+                shutil.rmtree(path) if path.is_dir() else path.unlink()
     return row
 
 
@@ -237,7 +239,7 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
     if not sweep_claims(exp, paper):
         raise ConfigError(f"{exp.id}: no claim of {exp.paper} needs only this run")
     variants = sample_variants(exp.config_cls, n, seed)
-    sweep_dir = Path(results_dir) / "sweeps" / exp.name
+    sweep_dir = Path(results_dir) / SWEEPS_DIR / exp.name
     sweep_dir.mkdir(parents=True, exist_ok=True)
     if engine == "dask":
         rows = _map_dask(exp.id, variants, camera, sweep_dir, keep_traces, papers, scheduler,
