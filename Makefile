@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 LOCK := requirements.lock
 
-.PHONY: help figures results report test test-slow bench lint lock clean
+.PHONY: help figures results report test test-slow bench lint lock clean sweeps
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*##' $(MAKEFILE_LIST) | sed -E 's/:.*## /\t/' | expand -t 12
@@ -41,6 +41,14 @@ test: $(STAMP)  ## the test suite (slow runs excluded)
 
 test-slow: $(STAMP)  ## only the long runs marked slow
 	$(BIN)/pytest -q -m slow
+
+# The committed sweeps (issue 19): each reruns only the variants not yet judged.
+SWEEPS := pomares2011.exp3:64 pomares2011.exp3_no_tactile:64
+
+sweeps: $(STAMP)  ## the variant sweeps over the declared ranges -> results/sweeps/ (Dask, all cores)
+	@for s in $(SWEEPS); do $(BIN)/repro sweep $${s%%:*} --n $${s##*:} --seed 0 || exit 1; done
+	$(BIN)/repro figures
+	$(BIN)/repro report
 
 bench: $(STAMP)  ## controller-step, QP, NMPC and sensor timings -> results/bench.csv
 	$(BIN)/python -m repro.bench

@@ -233,3 +233,15 @@ def test_rates_count_the_variants_with_their_interval(tmp_path: Path) -> None:
     assert claim["wilson_low"] < k / 16 < claim["wilson_high"]
     clause = rates[rates["clause"] == "the error stays under 1"].iloc[0]
     assert clause["held"] == k and clause["canonical"] == "holds"
+
+
+def test_sweep_figures_and_the_report_section_come_from_the_files(tmp_path: Path) -> None:
+    from repro.plots.sweeps import sweep_figures
+    from repro.runs.report import _robustness_section
+
+    run_sweep("fake.case", 8, seed=0, results_dir=tmp_path, papers=_papers(Runner()))
+    written = sweep_figures(tmp_path, tmp_path / "figures")
+    assert [p.name for p in written] == ["sweep_case_claim1.png", "sweep_case_claim1.pdf"]
+    text = "\n".join(_robustness_section(tmp_path, "fake", tmp_path))
+    assert "**fake.case**: 8 variants" in text and "the error stays under 1" in text
+    assert "No sweep yet" in "\n".join(_robustness_section(tmp_path, "other", tmp_path))

@@ -338,6 +338,36 @@ def _ranges_section(rows: Sequence[Sequence[str]] | None) -> list[str]:
         markdown_table(RANGES_COLUMNS, rows), ""]
 
 
+def _robustness_section(results_dir: Path, paper: str, base: Path) -> list[str]:
+    """Issue 19: per sweep of this paper's experiments, the rates of its claims and clauses
+    over the variants next to the canonical verdicts (results/sweeps/<exp>/rates.csv)."""
+    out = ["### Robustness over the scenes the paper leaves open", ""]
+    found = False
+    for rates in sorted((Path(results_dir) / "sweeps").glob("*/rates.csv")):
+        meta_path = rates.parent / "variants.columns.json"
+        if not meta_path.is_file():
+            continue
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        if not str(meta.get("experiment", "")).startswith(f"{paper}."):
+            continue
+        found = True
+        df = pd.read_csv(rates, dtype=str, keep_default_na=False)
+        rows = [(r.claim, r.clause or "(the claim)", r.variants, r.held,
+                 f"{float(r.rate):.2f}" if r.rate else "-",
+                 f"[{float(r.wilson_low):.2f}, {float(r.wilson_high):.2f}]"
+                 if r.wilson_low else "-", r.canonical or "-") for r in df.itertuples()]
+        failed = df["failed_runs"].iloc[0] if len(df) else "0"
+        out += [f"**{meta['experiment']}**: {meta.get('n')} variants of the ranges above "
+                f"(Sobol, seed {meta.get('seed')}, {meta.get('camera')} camera, "
+                f"{meta.get('engine', 'serial')} engine; {failed} failed runs; "
+                f"{_link(rates, base)}).", "",
+                markdown_table(("claim", "clause", "variants", "held", "rate", "Wilson 95 %",
+                                "canonical run"), rows), ""]
+    if not found:
+        out += ["_No sweep yet._", ""]
+    return out
+
+
 def _variation_note(results_dir: Path, paper: str) -> str:
     """One sentence on the measured machine-to-machine variation of the paper's clauses
     (results/clause_variation.csv), or that it was not measured."""
@@ -522,6 +552,7 @@ def render_report(
             ours=ours[owner == paper],
         )
         lines += _ranges_section((ranges or {}).get(paper))
+        lines += _robustness_section(results_dir, paper, base)
         note = (notes or {}).get(paper)
         if note is not None and Path(note).is_file():
             lines += ["### Discussion", "", Path(note).read_text(encoding="utf-8").strip(), ""]

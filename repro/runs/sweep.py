@@ -204,7 +204,7 @@ def _map_dask(exp_id: str, variants: Sequence[Mapping[str, Any]], camera: str | 
     cluster = None
     if scheduler is None:
         cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                               processes=True, host="127.0.0.1", dashboard_address=None)
+                               processes=True, host="127.0.0.1", dashboard_address=":0")
     client = Client(cluster if cluster is not None else scheduler)
     try:
         futures = {client.submit(run_variant, exp_id, i, dict(ov), camera, Path(sweep_dir),

@@ -1,0 +1,72 @@
+"""Sensitivity figures of the variant sweeps (issue 19, item 4), drawn from their files.
+
+For every ``results/sweeps/<exp>/variants.csv``: per claim, one panel per (clause,
+parameter): the clause's signed margin against the parameter's value, a held clause filled,
+a failed one hollow, the bound at margin 0. Written to
+``figures/<paper>/sweep_<exp>_claim<id>.png``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from repro.plots.style import apply_style, save_figure  # noqa: E402
+
+__all__ = ["sweep_figures"]
+
+
+def _clause_names(sweep_dir: Path) -> dict[tuple[str, int], str]:
+    from repro.runs.sweep_rates import _clause_names as names
+
+    return names(sweep_dir)
+
+
+def sweep_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
+    """Draw every sweep's sensitivity figures; return the files written."""
+    apply_style()
+    written: list[Path] = []
+    for csv in sorted((Path(results_dir) / "sweeps").glob("*/variants.csv")):
+        meta = json.loads((csv.parent / "variants.columns.json").read_text(encoding="utf-8"))
+        paper, exp = str(meta["experiment"]).split(".", 1)
+        df = pd.read_csv(csv)
+        df = df[df["run_status"] != "failed"]
+        params = [c for c in df.columns if c.startswith("p.")]
+        names = _clause_names(csv.parent)
+        claims = sorted({c.split(".", 1)[0][len("claim"):] for c in df.columns
+                         if c.startswith("claim") and c.endswith(".status")})
+        for cid in claims:
+            ks = [k for k in range(1, 100) if f"claim{cid}.c{k}.margin" in df.columns]
+            if not ks or not params:
+                continue
+            fig, axes = plt.subplots(len(ks), len(params), squeeze=False,
+                                     figsize=(2.6 * len(params), 1.6 * len(ks) + 0.6))
+            for r, k in enumerate(ks):
+                margin = pd.to_numeric(df[f"claim{cid}.c{k}.margin"], errors="coerce")
+                held = df[f"claim{cid}.c{k}.holds"].astype(str).str.lower().eq("true")
+                for c, p in enumerate(params):
+                    ax = axes[r][c]
+                    x = pd.to_numeric(df[p], errors="coerce")
+                    ax.scatter(x[held], margin[held], s=8, color="C0")
+                    ax.scatter(x[~held], margin[~held], s=8, facecolors="none",
+                               edgecolors="C3")
+                    ax.axhline(0.0, color="0.5", lw=0.6, ls=":")
+                    if r == len(ks) - 1:
+                        ax.set_xlabel(p[2:], fontsize=7)
+                    if c == 0:
+                        ax.set_ylabel(f"c{k} margin", fontsize=7)
+                    ax.tick_params(labelsize=6)
+                axes[r][0].set_title(names.get((cid, k), f"clause {k}")[:70], fontsize=6,
+                                     loc="left")
+            n = len(df)
+            fig.suptitle(f"{paper} {exp}: claim {cid} over {n} variants (filled: the clause "
+                         "holds; hollow: it fails)", fontsize=8)
+            written += save_figure(fig, Path(figures_dir), paper, f"sweep_{exp}_claim{cid}")
+            plt.close(fig)
+    return written
