@@ -27,6 +27,8 @@ from repro.errors import ConfigError, UnknownChoiceError
 __all__ = ["DISTRIBUTIONS", "RANGES_COLUMNS", "SweepRange", "declared_ranges", "ranges_rows",
            "sample_variants"]
 
+_MISSING = object()
+
 #: How a range is sampled: uniform in value, uniform in log(value), or one of ``values``.
 DISTRIBUTIONS = ("uniform", "log-uniform", "discrete")
 
@@ -41,6 +43,10 @@ class SweepRange:
             numerical argument); never the verdict.
         dist: one of :data:`DISTRIBUTIONS`.
         values: the choices of a ``discrete`` range (each within ``[low, high]``).
+        when: ``((field, value), ...)``: the range applies only to the configs whose
+            defaults have these values (e.g. ``(("case", "case1"),)``: a scene's layout is
+            swept only in the experiments of that scene); empty = every config that has the
+            field.
     """
 
     low: float
@@ -48,6 +54,11 @@ class SweepRange:
     reason: str
     dist: str = "uniform"
     values: tuple[float, ...] = ()
+    when: tuple[tuple[str, Any], ...] = ()
+
+    def applies(self, defaults: Any) -> bool:
+        """Whether this range is swept in the config whose defaults are ``defaults``."""
+        return all(getattr(defaults, f, _MISSING) == v for f, v in self.when)
 
     def __post_init__(self) -> None:
         if self.dist not in DISTRIBUTIONS:
@@ -64,6 +75,9 @@ class SweepRange:
                                   f"within ({self.low}, {self.high})")
         elif self.values:
             raise ConfigError("values are only for a discrete sweep range")
+        if any(not (isinstance(w, tuple) and len(w) == 2 and isinstance(w[0], str))
+               for w in self.when):
+            raise ConfigError(f"sweep range when={self.when!r}: give ((field, value), ...)")
 
     def check_field(self, name: str, metadata: dict[str, Any], default: Any) -> None:
         """Refuse a range outside the field's declared ``range`` or on a non-scalar field."""
@@ -89,16 +103,19 @@ class SweepRange:
 
     def describe(self) -> str:
         extra = f" {list(self.values)}" if self.dist == "discrete" else ""
-        return f"{self.dist} [{self.low:g}, {self.high:g}]{extra}: {self.reason}"
+        only = "".join(f" (only where {f} = {v!r})" for f, v in self.when)
+        return f"{self.dist} [{self.low:g}, {self.high:g}]{extra}{only}: {self.reason}"
 
 
 def declared_ranges(config_cls: Any) -> dict[str, SweepRange]:
-    """``{field: SweepRange}`` of a config class (or instance), in field order."""
+    """``{field: SweepRange}`` of a config class (or instance), in field order: the fields
+    that declare a range that applies to the class's defaults (:meth:`SweepRange.applies`)."""
     cls = config_cls if isinstance(config_cls, type) else type(config_cls)
     if not dataclasses.is_dataclass(cls):
         raise ConfigError(f"{cls.__name__} is not a dataclass config")
+    defaults = cls()
     return {f.name: f.metadata["sweep"] for f in dataclasses.fields(cls)
-            if f.metadata.get("sweep") is not None}
+            if f.metadata.get("sweep") is not None and f.metadata["sweep"].applies(defaults)}
 
 
 def sample_variants(config_cls: Any, n: int, seed: int) -> list[dict[str, float | int]]:

@@ -159,6 +159,72 @@ def test_the_cli_sweeps_and_reports(tmp_path: Path, monkeypatch: pytest.MonkeyPa
                      "--serial"]) == 2
 
 
+# ----------------------------------------------------------------- paired sweeps
+OTHER_BOUND = 0.8  # claim 2 on the partner run: its error (2 gain) stays under 0.8
+
+
+def _check_other(runs: dict[str, RunFiles]) -> ClaimResult:
+    err = float(runs["other"].trace["err"].max())
+    return ClaimResult.from_clauses(f"other's error {err:.2f}", [
+        Clause("the partner's error stays under 0.8", err, "<", OTHER_BOUND, "-",
+               "ours: a test bound")])
+
+
+def _paired(runner: Runner) -> dict[str, Paper]:
+    base = _papers(runner)["fake"]
+    claims = (base.claims() or ())[:1] + (
+        Claim("fake", "2", "the partner's error", "< 0.8", ("case", "other"), _check_other),)
+    return {"fake": Paper(key="fake", experiments=base.experiments, claims=lambda: claims,
+                          sweep_groups={"case": ("other",)}, joint_claims=(("1", "2"),))}
+
+
+def test_a_paired_sweep_runs_the_partner_on_each_variant_and_rates_them_jointly(
+        tmp_path: Path) -> None:
+    (tmp_path / "claims.csv").write_text("paper,claim,status\nfake,1,reproduced\n"
+                                         "fake,2,not_reproduced\n")
+    runner = Runner()
+    path = run_sweep("fake.case", 16, seed=3, results_dir=tmp_path, papers=_paired(runner))
+    df = pd.read_csv(path)
+    gains = np.array([v["gain"] for v in sample_variants(GainCfg, 16, seed=3)])
+    # both members of every variant ran with the variant's value, the swept one first
+    assert [c.gain for c in runner.calls] == [g for g in gains for _ in range(2)]
+    assert list(df["claim1.c1.holds"]) == list(2 * gains < BOUND)
+    assert list(df["claim2.c1.holds"]) == list(2 * gains < OTHER_BOUND)
+    for d in (path.parent / "variants").iterdir():  # the partner's run in its own folder
+        assert sorted(p.name for p in (d / "other").iterdir()) == ["events.csv",
+                                                                    "manifest.json"]
+        assert json.loads((d / VERDICTS_FILE).read_text())["members"] == {"case": ".",
+                                                                          "other": "other"}
+    rates = pd.read_csv(path.parent / "rates.csv", dtype={"claim": str})
+    joint = rates[rates["claim"] == "1+2"].iloc[0]
+    k = int(((2 * gains < BOUND) & (2 * gains < OTHER_BOUND)).sum())
+    assert (joint["variants"], joint["held"]) == (16, k) and 0 < k < 16
+    assert joint["canonical"] == "not jointly"
+    cols = json.loads((path.parent / "variants.columns.json").read_text())
+    assert cols["members"] == ["fake.case", "fake.other"]
+
+
+def test_a_partner_with_other_ranges_is_refused(tmp_path: Path) -> None:
+    @dataclass(frozen=True)
+    class OtherRange(GainCfg):
+        gain: float = param(0.3, range=(0.0, 2.0),
+                            sweep=SweepRange(0.2, 0.9, reason="a wider range"))
+
+    papers = _paired(Runner())
+    exps = papers["fake"].experiments
+    odd = Experiment(name="other", paper="fake", description="x", config_cls=OtherRange,
+                     run=exps[1].run)
+    bad = {"fake": Paper(key="fake", experiments=(exps[0], odd), claims=papers["fake"].claims,
+                         sweep_groups={"case": ("other",)})}
+    with pytest.raises(ConfigError, match="declares other ranges"):
+        run_sweep("fake.case", 2, 0, tmp_path, papers=bad)
+    unknown = {"fake": Paper(key="fake", experiments=exps, claims=papers["fake"].claims,
+                             sweep_groups={"case": ("nope",)})}
+    with pytest.raises(ConfigError, match="unknown experiments"):
+        run_sweep("fake.case", 2, 0, tmp_path, papers=unknown)
+    assert not (tmp_path / "sweeps" / "case" / "variants").exists()
+
+
 # ----------------------------------------------------------------- the Dask engine
 def _by_value() -> None:
     """Workers are fresh processes that cannot import this test module: ship its fake

@@ -117,3 +117,44 @@ def test_the_pomares2011_ranges_are_declared_with_reasons() -> None:
                                                  "contact_stiffness"}
     om = declared_ranges(Exp1Config)["omega_max"]
     assert om.low == pytest.approx(2 * math.pi * 200 / 60) and om.dist == "log-uniform"
+
+
+def test_a_range_can_apply_to_one_scene_only() -> None:
+    """``when``: case 1's board layout is swept in the case-1 experiments, not in case 2's."""
+
+    @dataclass(frozen=True)
+    class Scenes:
+        case: str = param("a", choices=("a", "b"))
+        width: float = param(1.0, range=(0.0, 5.0),
+                             sweep=SweepRange(0.5, 2.0, when=(("case", "a"),),
+                                              reason="only scene a has a width"))
+        noise: float = param(0.1, range=(0.0, 1.0),
+                             sweep=SweepRange(0.0, 0.2, reason="every scene has noise"))
+
+    @dataclass(frozen=True)
+    class SceneB(Scenes):
+        case: str = param("b", choices=("a", "b"))
+
+    assert list(declared_ranges(Scenes)) == ["width", "noise"]
+    assert list(declared_ranges(SceneB)) == ["noise"]
+    assert set(sample_variants(SceneB, 4, 0)[0]) == {"noise"}
+    assert "(only where case = 'a')" in declared_ranges(Scenes)["width"].describe()
+    with pytest.raises(ConfigError, match="when="):
+        SweepRange(0.0, 1.0, when=("case", "a"), reason="a malformed condition")  # type: ignore[arg-type]
+
+
+def test_the_thomas2024_case1_layout_is_swept_in_case1_and_its_ablation_only() -> None:
+    from experiments.thomas2024 import config as c
+
+    layout = {"case1_turn_deg", "case1_right_lateral", "case1_left_lateral", "case1_right_top",
+              "case1_left_top", "case1_right_back", "case1_left_back", "case1_front"}
+    assert set(declared_ranges(c.Case1Config)) == layout | {"proximity_noise"}
+    assert declared_ranges(c.Case1NoProximityConfig) == declared_ranges(c.Case1Config)
+    assert set(declared_ranges(c.Case2Config)) == {"proximity_noise"}
+    assert not declared_ranges(c.ParallelConfig)  # noise-free by design: not swept
+    # every default inside its range (the canonical layout is one plausible scene)
+    d = c.Case1Config()
+    for name, rng in declared_ranges(c.Case1Config).items():
+        assert rng.low <= getattr(d, name) <= rng.high, name
+    assert declared_ranges(c.Case1Config)["case1_right_lateral"].low == pytest.approx(
+        0.07 + 0.08 + 0.005)  # ring 2's radius + its delta* + half a board

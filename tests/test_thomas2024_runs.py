@@ -194,3 +194,38 @@ def test_bad_config_rejected_before_running(tmp_path: Path) -> None:
 
     with pytest.raises(ConfigError):
         run(dataclasses.replace(C.Case1Config(), q0_deg=(0.0, 1.0)), tmp_path / "bad")
+    with pytest.raises(ConfigError, match="right board spans"):
+        run(dataclasses.replace(C.Case1Config(), case1_right_back=0.0, case1_front=0.005),
+            tmp_path / "short_board")
+    assert not (tmp_path / "short_board").exists()
+
+
+def test_case1_layout_fields_place_the_boards() -> None:
+    """Issue 19: case 1's boards come from the config (swept), the defaults are the
+    committed layout, and each field moves what it names and nothing else."""
+    from experiments.thomas2024 import scene as sc
+    from experiments.thomas2024.run import case1_layout
+
+    assert case1_layout(C.Case1Config()) == sc.Case1Layout()
+    T_goal = np.eye(4)
+    T_goal[:3, 3] = (0.5, -0.2, 0.53)
+    base = {p.name: p for p in sc.case1_planes(T_goal)}
+    # the committed layout: 16.5 cm right, 55 x 55 cm (z 0.30-0.85, s -0.30..0.25)
+    yaw = sc.CORRIDOR_YAW + np.deg2rad(-15.0)
+    left = np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+    d = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    c = base["right"].T_world[:3, 3]
+    assert (c - T_goal[:3, 3]) @ left == pytest.approx(-0.165)
+    assert (c - T_goal[:3, 3]) @ d == pytest.approx((-0.30 + 0.25) / 2)
+    assert base["right"].size == pytest.approx((0.55, 0.55)) and c[2] == pytest.approx(0.575)
+    moved = {p.name: p for p in sc.case1_planes(T_goal, dataclasses.replace(
+        sc.Case1Layout(), right_lateral=0.215, left_top=1.0))}
+    shift = moved["right"].T_world[:3, 3] - c
+    np.testing.assert_allclose(shift, -0.05 * left, atol=1e-12)  # 5 cm further right only
+    np.testing.assert_allclose(moved["right"].T_world[:3, :3], base["right"].T_world[:3, :3])
+    assert moved["left"].size == pytest.approx((0.70, 0.70))  # taller left board ...
+    assert moved["left"].T_world[2, 3] == pytest.approx((0.30 + 1.0) / 2)  # ... same bottom
+    turned = {p.name: p for p in sc.case1_planes(T_goal, dataclasses.replace(
+        sc.Case1Layout(), turn_deg=15.0))}
+    n0, n1 = (p["right"].T_world[:3, 2] for p in (base, turned))  # the board's normal
+    assert np.degrees(np.arccos(np.clip(n0 @ n1, -1, 1))) == pytest.approx(30.0)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 from repro.config import param
 from repro.control.qp import SOLVERS as QP_SOLVERS  # proxsuite, osqp, daqp, quadprog
+from repro.sweep_ranges import SweepRange
 
 CASES = ("case1", "case2", "case3", "parallel")
 RING_MODELS = ("coarse", "beta1", "exact")
@@ -25,6 +26,25 @@ DURATION_RANGE = (0.1, 600.0)  # [s]: at least 3 control steps, at most 10 minut
 Q0_RANGE_DEG = (-360.0, 360.0)  # [deg]
 Q0_WHY = "within one turn; check_config enforces the Panda's joint limits"
 SEED_RANGE = (0, 2**32 - 1)  # numpy SeedSequence entropy: any 32-bit unsigned integer
+
+# Case 1's boards (Sec. V-A: "we place two planar obstacles in the workspace to create a
+# congested space around the robot arm while it has to converge to the goal position ...
+# a final configuration of the manipulator in between the obstacles", Fig. 4). The paper
+# gives no dimension; the sweep ranges (issue 19) are what that text and figure allow.
+CASE1 = (("case", "case1"),)
+#: ring 2's radius 0.07 m + its delta* 0.08 m + the board's half thickness 0.005 m: a board
+#: nearer than this to ring 2's goal puts the goal inside the threshold (no global minimum)
+CASE1_LATERAL_MIN = 0.155
+LATERAL_WHY = ("from ring 2's threshold at the goal (0.07 m radius + 0.08 m delta* + 5 mm half "
+               "board: nearer, the goal is infeasible and case 1's global convergence "
+               "impossible) to ~10 cm beyond it (Sec. V: the workspace is set up 'in such a "
+               "manner that it leads to close encounters with obstacles')")
+TOP_WHY = ("Fig. 4b: the boards flank the final arm; the top edge from just above ring 2 at the "
+           "goal (0.53 m + 0.07 m radius) to the flange's start height (0.98 m), above which "
+           "a board is taller than the whole motion")
+BACK_WHY = ("how far the board reaches back from the goal towards the start: from 15 cm "
+            "(only ring 2's final stretch) to 50 cm (ring 2's whole horizontal path from its "
+            "start, 0.50 m)")
 
 
 @dataclass(frozen=True)
@@ -64,11 +84,52 @@ class Thomas2024Config:
     q0_deg: tuple[float, ...] = param((0.0, -60.0, 0.0, -90.0, 0.0, 100.0, 45.0), unit="deg",
                                       range=Q0_RANGE_DEG, help="initial joint positions "
                                       "(Sec. V-A); " + Q0_WHY)
+    # --- case 1's board layout (used only when case == "case1"; scene.case1_planes)
+    case1_turn_deg: float = param(
+        -15.0, unit="deg", range=(-90.0, 90.0),
+        help="the corridor's yaw relative to ring 2's straight path to the goal (negative: "
+             "the path runs into the right board)",
+        sweep=SweepRange(-30.0, 30.0, when=CASE1, reason=(
+            "Fig. 4b: the boards run along the arm's final configuration; at 30 deg, ring 2's "
+            "0.50 m straight path to the goal crosses a board's plane (~0.17 m aside) 0.33 m "
+            "before the goal, so beyond it a board stands across the path, not beside it")))  # ours: the straight path meets the right board
+    case1_right_lateral: float = param(
+        0.165, unit="m", range=(0.0, 1.0),
+        help="right board's centre plane from the corridor axis through ring 2's goal",
+        sweep=SweepRange(CASE1_LATERAL_MIN, 0.25, when=CASE1, reason=LATERAL_WHY))  # ours: 1 cm beyond the threshold
+    case1_left_lateral: float = param(
+        0.19, unit="m", range=(0.0, 1.0),
+        help="left board's centre plane from the corridor axis through ring 2's goal",
+        sweep=SweepRange(CASE1_LATERAL_MIN, 0.25, when=CASE1, reason=LATERAL_WHY))  # ours: 3.5 cm beyond it
+    case1_right_top: float = param(0.85, unit="m", range=(0.31, 2.0),
+                                   help="right board's top edge (bottom at 0.30 m)",
+                                   sweep=SweepRange(0.60, 1.0, when=CASE1, reason=TOP_WHY))  # ours
+    case1_left_top: float = param(0.85, unit="m", range=(0.31, 2.0),
+                                  help="left board's top edge (bottom at 0.30 m)",
+                                  sweep=SweepRange(0.60, 1.0, when=CASE1, reason=TOP_WHY))  # ours
+    case1_right_back: float = param(0.30, unit="m", range=(0.0, 1.5),
+                                    help="right board's extent from the goal back along the "
+                                         "corridor", sweep=SweepRange(0.15, 0.50, when=CASE1,
+                                                                      reason=BACK_WHY))  # ours
+    case1_left_back: float = param(0.45, unit="m", range=(0.0, 1.5),
+                                   help="left board's extent from the goal back along the "
+                                        "corridor", sweep=SweepRange(0.15, 0.50, when=CASE1,
+                                                                     reason=BACK_WHY))  # ours
+    case1_front: float = param(
+        0.25, unit="m", range=(0.0, 1.0),
+        help="both boards' extent past the goal along the corridor",
+        sweep=SweepRange(0.10, 0.40, when=CASE1, reason=(
+            "past ring 2's goal: from 10 cm (ring 2 and the camera) to 40 cm (beyond the "
+            "target, 30 cm ahead of the camera, and its card)")))  # ours
     # --- sensors
     camera_mode: str = param("render", choices=("render", "exact"),
                              help="render = PyBullet image + OpenCV; exact = projection")
-    proximity_noise: float = param(0.002, unit="m", range=(0.0, 0.1),
-                                   help="std of ToF noise")  # ours: VL53L-class ToF, a few mm
+    proximity_noise: float = param(
+        0.002, unit="m", range=(0.0, 0.1), help="std of ToF noise",
+        sweep=SweepRange(0.0005, 0.005, dist="log-uniform", reason=(
+            "VL53L-class ToF ranging at 4-30 cm indoors: a standard deviation of a few mm; "
+            "a decade around the default, from a well-calibrated sensor (0.5 mm) to the "
+            "paper's 'accuracy of data reduces around minimum distance' (5 mm)")))  # ours: VL53L-class ToF, a few mm
     max_range: float = param(1.0, unit="m", range=(0.05, 10.0),
                              help="reading with no detection (Sec. V: 1 m)")
     qp_solver: str = param("proxsuite", choices=QP_SOLVERS,

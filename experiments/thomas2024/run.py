@@ -41,6 +41,10 @@ BOARD_RGBA = (0.8, 0.7, 0.55, 1.0)  # ours: light wood
 HAND_RGBA = (0.9, 0.75, 0.65, 1.0)  # ours: skin
 
 
+#: The shortest board a case-1 layout may have [m] (ours: wider than a ToF sensor's spot)
+MIN_BOARD_M = 0.01
+
+
 def check_config(config: Thomas2024Config) -> None:
     """Reject a malformed config before anything runs (ranges, choices, lengths)."""
     validate(config)
@@ -50,6 +54,11 @@ def check_config(config: Thomas2024Config) -> None:
     bad = [m for m in config.ring_models if m not in RING_MODELS]
     if bad:
         raise UnknownChoiceError("ring model", bad[0], RING_MODELS)
+    for side in ("right", "left"):
+        length = getattr(config, f"case1_{side}_back") + config.case1_front
+        if length < MIN_BOARD_M:
+            raise ConfigError(f"case 1's {side} board spans {length:g} m along the corridor "
+                              f"(case1_{side}_back + case1_front): at least {MIN_BOARD_M:g} m")
     if len(config.q0_deg) != 7:
         raise ConfigError(f"q0_deg needs 7 joint angles [deg], got {len(config.q0_deg)}")
     q0 = np.deg2rad(config.q0_deg)
@@ -209,6 +218,12 @@ def estimated_rings(config: Thomas2024Config) -> tuple[int, ...]:
     return tuple(k + 1 for k, m in enumerate(config.ring_models) if m != "coarse")
 
 
+def case1_layout(config: Thomas2024Config) -> sc.Case1Layout:
+    """Case 1's board layout from the config's ``case1_*`` fields."""
+    return sc.Case1Layout(**{f: getattr(config, f"case1_{f}")
+                             for f in sc.Case1Layout.__dataclass_fields__})
+
+
 def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024Controller]:
     """The scene, robot, sensors and controller of ``config.case``."""
     check_config(config)
@@ -224,7 +239,7 @@ def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024C
     T_goal_cam = robot.frame_pose("camera_optical", q_goal)
     T_ring2_goal = robot.frame_pose("ring2", q_goal)
     planes = {"parallel": lambda: sc.parallel_planes(T_ring2_goal, config.thresholds[1]),
-              "case1": lambda: sc.case1_planes(T_ring2_goal),
+              "case1": lambda: sc.case1_planes(T_ring2_goal, case1_layout(config)),
               "case2": lambda: sc.case2_planes(T_ring2_goal, config.thresholds[1])
               }.get(config.case, lambda: case.planes)()
     for pl in planes:

@@ -200,18 +200,46 @@ SCENES: dict[str, Scene] = {
     "parallel": Scene(q_goal_deg=Q_GOAL_DEG, target_depth=TARGET_DEPTH),
 }
 
-def case1_planes(T_world_ring2_goal: np.ndarray) -> tuple[Plane, ...]:
-    """Case 1 boards: a corridor around ring 2's goal, 16.5 / 19 cm to its right / left,
-    turned by 25 deg about the goal so that the unconstrained path meets the right board."""
-    turn = np.deg2rad(-15.0)  # ours: the corridor's angle to the straight visual path
-    yaw = CORRIDOR_YAW + turn
+@dataclass(frozen=True)
+class Case1Layout:
+    """Case 1's two boards, in corridor coordinates about ring 2's goal (Sec. V-A, Fig. 4;
+    every number is ours: the config's ``case1_*`` fields, swept in issue 19).
+
+    The corridor axis runs through ring 2's goal, horizontally, turned by ``turn_deg`` from
+    ring 2's straight path (``CORRIDOR_YAW``); s along it (> 0 past the goal), lateral to
+    its left. Each board is vertical, faces the axis, spans s in [-back, front] and z in
+    [BOARD_BOTTOM, top] [m], its centre plane ``lateral`` [m] from the axis.
+    """
+
+    turn_deg: float = -15.0
+    right_lateral: float = 0.165
+    left_lateral: float = 0.19
+    right_top: float = 0.85
+    left_top: float = 0.85
+    right_back: float = 0.30
+    left_back: float = 0.45
+    front: float = 0.25
+
+
+BOARD_BOTTOM = 0.30  # ours: case 1's boards stand on a 30 cm support, below ring 2's path
+
+
+def case1_planes(T_world_ring2_goal: np.ndarray, layout: Case1Layout = Case1Layout()
+                 ) -> tuple[Plane, ...]:
+    """Case 1 boards: a corridor around ring 2's goal (``layout``); by default 16.5 / 19 cm
+    to its right / left, turned by -15 deg so that the unconstrained path meets the right
+    board."""
+    yaw = CORRIDOR_YAW + np.deg2rad(layout.turn_deg)
     d = np.array([np.cos(yaw), np.sin(yaw), 0.0])
     left = np.array([-np.sin(yaw), np.cos(yaw), 0.0])
     g = T_world_ring2_goal[:3, 3]
     boards = []
     # (name, s from [m], s to [m] along the corridor from the goal, lateral [m], z0, z1 [m])
-    for name, s0, s1, lat, z0, z1 in (("right", -0.30, 0.25, -0.165, 0.30, 0.85),  # ours
-                                      ("left", -0.45, 0.25, 0.19, 0.30, 0.85)):  # ours
+    for name, s0, s1, lat, z0, z1 in (
+            ("right", -layout.right_back, layout.front, -layout.right_lateral, BOARD_BOTTOM,
+             layout.right_top),
+            ("left", -layout.left_back, layout.front, layout.left_lateral, BOARD_BOTTOM,
+             layout.left_top)):
         c = np.array([g[0], g[1], 0.0]) + d * (s0 + s1) / 2 + left * lat
         c[2] = (z0 + z1) / 2
         normal_yaw = yaw + (-np.pi / 2 if lat > 0 else np.pi / 2)

@@ -95,6 +95,12 @@ class Paper:
     #: ``bench(results_dir)`` -> rows (dicts with benchmark, median_s, p95_s, n) for
     #: ``make bench``; may read the committed traces to replay realistic states.
     bench: Callable[[Path], list[dict[str, Any]]] | None = None
+    #: ``{experiment: (partner, ...)}``: experiments swept on the same variants as
+    #: ``experiment`` (an ablation on the same scene; :mod:`repro.runs.sweep`)
+    sweep_groups: Mapping[str, tuple[str, ...]] = dataclasses.field(default_factory=dict)
+    #: claims the paper makes together, whose joint rate a sweep reports (e.g. thomas2024
+    #: 1, 2, 3: case 1 converges, its ablation collides, in that order of events)
+    joint_claims: tuple[tuple[str, ...], ...] = ()
 
 
 # --------------------------------------------------------------------------- discovery

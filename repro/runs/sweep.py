@@ -50,10 +50,31 @@ def _experiment(exp_id: str, papers: Mapping[str, Paper] | None) -> tuple[Experi
     return exp, papers[exp.paper]
 
 
+def sweep_members(exp: Experiment, paper: Paper) -> tuple[Experiment, ...]:
+    """``exp`` and the experiments swept with it on the same variants (the paper's
+    ``sweep_groups``: an ablation on the same scene, e.g. thomas2024 case 1 without the
+    CBFs). Every member must declare the same ranges, so one variant is one scene."""
+    by_name = {e.name: e for e in paper.experiments}
+    names = (exp.name, *[n for n in paper.sweep_groups.get(exp.name, ()) if n != exp.name])
+    unknown = [n for n in names if n not in by_name]
+    if unknown:
+        raise ConfigError(f"{paper.key}: sweep group of {exp.name} names unknown experiments "
+                          f"{unknown}")
+    members = tuple(by_name[n] for n in names)
+    ranges = declared_ranges(exp.config_cls)
+    for m in members[1:]:
+        if declared_ranges(m.config_cls) != ranges:
+            raise ConfigError(f"{m.id} is swept with {exp.id} but declares other ranges "
+                              f"({sorted(declared_ranges(m.config_cls))} vs {sorted(ranges)})")
+    return members
+
+
 def sweep_claims(exp: Experiment, paper: Paper) -> list[Claim]:
-    """The paper's claims that need no run but ``exp`` (judged on each variant alone)."""
+    """The paper's claims that need no run but ``exp`` and its sweep partners
+    (:func:`sweep_members`), judged on each variant."""
+    names = {m.name for m in sweep_members(exp, paper)}
     claims = list(paper.claims()) if paper.claims is not None else []
-    return [c for c in claims if tuple(c.runs) == (exp.name,)]
+    return [c for c in claims if c.runs and set(c.runs) <= names]
 
 
 def variant_config(exp: Experiment, overrides: Mapping[str, Any], camera: str | None) -> Any:
@@ -74,10 +95,10 @@ def variant_config(exp: Experiment, overrides: Mapping[str, Any], camera: str | 
     return config
 
 
-def _judge(claims: Sequence[Claim], run_dir: Path, name: str) -> dict[str, Any]:
-    """Every claim on the variant: status and clause figures (a check that raises is
-    recorded as ``not_run`` with its error, not lost)."""
-    runs = {name: load_run(run_dir)}
+def _judge(claims: Sequence[Claim], run_dirs: Mapping[str, Path]) -> dict[str, Any]:
+    """Every claim on the variant's runs (``{experiment name: run folder}``): status and
+    clause figures (a check that raises is recorded as ``not_run`` with its error)."""
+    runs = {name: load_run(d) for name, d in run_dirs.items()}
     out: dict[str, Any] = {}
     for claim in claims:
         try:
@@ -114,15 +135,34 @@ _KEEP = ("manifest.json", "events.csv", VERDICTS_FILE)
 SWEEPS_DIR = "sweeps"
 
 
+def _member_dir(run_dir: Path, primary: str, name: str) -> Path:
+    """A member's run folder: the variant's folder for the swept experiment, a sub-folder
+    named after it for a partner."""
+    return run_dir if name == primary else run_dir / name
+
+
+def _prune(run_dir: Path, keep: Sequence[str] = ()) -> None:
+    """Drop what a variant without its trace does not keep (:data:`_KEEP`; ``keep``: the
+    partners' sub-folders, pruned the same way)."""
+    for path in run_dir.iterdir():
+        if path.name in keep and path.is_dir():
+            _prune(path)
+        elif path.name not in _KEEP:
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+
+
 def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: str | None,
                 sweep_dir: Path, keep_traces: bool = False,
                 papers: Mapping[str, Paper] | None = None) -> dict[str, Any]:
-    """Run (or, if already judged, read) variant ``index`` and return its row."""
+    """Run (or, if already judged, read) variant ``index`` and return its row: the swept
+    experiment and each partner (:func:`sweep_members`) with the same ``overrides``."""
     exp, paper = _experiment(exp_id, papers)
-    config = variant_config(exp, overrides, camera)
-    if not keep_traces:
-        config = _outputs_off(config)
-    chash = registry.compute_config_hash(config)
+    members = sweep_members(exp, paper)
+    configs = {}
+    for m in members:
+        config = variant_config(m, overrides, camera)
+        configs[m.name] = config if keep_traces else _outputs_off(config)
+    chash = registry.compute_config_hash(configs[exp.name])
     run_dir = Path(sweep_dir) / "variants" / chash[:12]
     verdicts_path = run_dir / VERDICTS_FILE
     if verdicts_path.is_file():
@@ -131,12 +171,16 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
             return {**done["row"], "variant": index}
     tic = time.perf_counter()
     run_dir.parent.mkdir(parents=True, exist_ok=True)
-    status, reason = "completed", ""
+    dirs = {m.name: _member_dir(run_dir, exp.name, m.name) for m in members}
+    status, reason, verdicts = "completed", "", {}
     try:
-        registry.run_experiment(exp, config, run_dir)
-        manifest = json.loads((run_dir / "manifest.json").read_text(encoding="utf-8"))
-        status, reason = str(manifest.get("status")), str(manifest.get("reason", ""))
-        verdicts = _judge(sweep_claims(exp, paper), run_dir, exp.name)
+        for m in members:
+            registry.run_experiment(m, configs[m.name], dirs[m.name])
+            manifest = json.loads((dirs[m.name] / "manifest.json").read_text(encoding="utf-8"))
+            if manifest.get("status") != "completed" and status == "completed":
+                status = str(manifest.get("status"))
+                reason = (f"{m.name}: " if m is not exp else "") + str(manifest.get("reason", ""))
+        verdicts = _judge(sweep_claims(exp, paper), dirs)
     except Exception as exc:  # a crashed variant is a row, not a lost sweep (^C still stops)
         status, reason, verdicts = "failed", f"{type(exc).__name__}: {exc}", {}
     row: dict[str, Any] = {"variant": index, "config_hash": chash[:12], "run_status": status,
@@ -148,13 +192,14 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
         for k, c in enumerate(v["clauses"], start=1):
             for what in ("measured", "margin", "holds"):
                 row[f"claim{cid}.c{k}.{what}"] = c[what]
+    run_dir.mkdir(parents=True, exist_ok=True)
     verdicts_path.write_text(json.dumps({"config_hash": chash, "row": row,
+                                         "members": {n: str(d.relative_to(run_dir))
+                                                     for n, d in dirs.items()},
                                          "verdicts": verdicts}, indent=1, default=_json),
                              encoding="utf-8")
     if not keep_traces:
-        for path in run_dir.iterdir():
-            if path.name not in _KEEP:
-                shutil.rmtree(path) if path.is_dir() else path.unlink()
+        _prune(run_dir, keep=[n for n in dirs if n != exp.name])
     return row
 
 
@@ -258,9 +303,10 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
     tmp.replace(path)
     (sweep_dir / "variants.columns.json").write_text(
         json.dumps({"experiment": exp.id, "n": n, "seed": seed, "camera": camera,
+                    "members": [m.id for m in sweep_members(exp, paper)],
                     "engine": engine,
                     "columns": _columns(exp, paper)}, indent=1) + "\n", encoding="utf-8")
     from repro.runs.sweep_rates import write_rates
 
-    write_rates(sweep_dir, Path(results_dir), exp.paper, exp.name)
+    write_rates(sweep_dir, Path(results_dir), exp.paper, exp.name, paper.joint_claims)
     return path

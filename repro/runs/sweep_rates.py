@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import pandas as pd
@@ -64,8 +65,12 @@ def _canonical(results_dir: Path, paper: str) -> tuple[dict[str, str], dict[tupl
     return claims, clauses
 
 
-def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str) -> Path:
-    """Write ``sweep_dir / rates.csv`` from ``sweep_dir / variants.csv``; return its path."""
+def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str,
+                joint: Sequence[Sequence[str]] = ()) -> Path:
+    """Write ``sweep_dir / rates.csv`` from ``sweep_dir / variants.csv``; return its path.
+
+    ``joint``: sets of claims the paper makes together; each set whose claims were all
+    judged gets a row ``claim = "1+2+3"``: the variants in which every one is reproduced."""
     sweep_dir, results_dir = Path(sweep_dir), Path(results_dir)
     df = pd.read_csv(sweep_dir / "variants.csv")
     judged = df[df["run_status"] != "failed"]
@@ -91,6 +96,20 @@ def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str)
             rows.append((experiment, cid, name, n, k, k / n if n else math.nan, lo, hi, failed,
                          canon_clauses.get((cid, name), "")))
             j += 1
+    for group in joint:
+        cols = [f"claim{c}.status" for c in group]
+        if not group or any(c not in df.columns for c in cols):
+            continue
+        st = judged[cols].astype(str)
+        ok = st.notna().all(axis=1) & ~st.isin(["nan", ""]).any(axis=1)
+        both = st[ok].eq("reproduced").all(axis=1)
+        k, n = int(both.sum()), int(ok.sum())
+        lo, hi = wilson_interval(k, n)
+        canon = [canon_claims.get(c, "") for c in group]
+        rows.append((experiment, "+".join(group), "(jointly: every claim reproduced)", n, k,
+                     k / n if n else math.nan, lo, hi, failed,
+                     "reproduced" if all(c == "reproduced" for c in canon)
+                     else ("" if not all(canon) else "not jointly")))
     out = sweep_dir / "rates.csv"
     pd.DataFrame(rows, columns=list(RATES_COLUMNS)).to_csv(out, index=False,
                                                            float_format="%.6g")
