@@ -567,16 +567,6 @@ def _cmd_figures(args: argparse.Namespace) -> int:
             code = 1
         drew_any = True
 
-    if (results_dir / "sweeps").is_dir():
-        from repro.plots.sweeps import sweep_figures
-
-        try:
-            for path in sweep_figures(results_dir, figures_dir):
-                print(f"sweeps: wrote {path}")
-        except Exception as exc:  # a broken sweep figure must not hide the claims
-            print(f"repro: error: sweep figures failed: {type(exc).__name__}: "
-                  f"{_first_line(str(exc))}", file=sys.stderr)
-            code = 1
     claims = [c for paper in papers.values() if paper.claims is not None for c in paper.claims()]
     if claims:
         from repro.runs.claims import evaluate_claims, write_claims_csv, write_clauses_csv
@@ -594,6 +584,19 @@ def _cmd_figures(args: argparse.Namespace) -> int:
         print(f"wrote {len(claims)} claims to {csv_path}")
     elif not drew_any:
         print("no paper has figures or claims")
+    if (results_dir / "sweeps").is_dir():  # after claims.csv: rates name the canonical verdicts
+        from repro.plots.sweeps import sweep_figures
+        from repro.runs.sweep import refresh_tables
+
+        try:
+            for path in refresh_tables(results_dir, papers):
+                print(f"sweeps: wrote {path}")
+            for path in sweep_figures(results_dir, figures_dir):
+                print(f"sweeps: wrote {path}")
+        except Exception as exc:  # a broken sweep figure must not hide the claims
+            print(f"repro: error: sweep figures failed: {type(exc).__name__}: "
+                  f"{_first_line(str(exc))}", file=sys.stderr)
+            code = 1
     return code
 
 

@@ -38,6 +38,12 @@ class GainCfg:
     fail_above: float = param(2.0, range=(0.0, 2.0), help="test hook: fail for gain above")
 
 
+@dataclass(frozen=True)
+class TwoCfg(GainCfg):
+    other: float = param(0.5, range=(0.0, 1.0),
+                         sweep=SweepRange(0.0, 1.0, reason="a value that decides nothing"))
+
+
 class Runner:
     def __init__(self) -> None:
         self.calls: list[GainCfg] = []
@@ -311,3 +317,37 @@ def test_sweep_figures_and_the_report_section_come_from_the_files(tmp_path: Path
     text = "\n".join(_robustness_section(tmp_path, "fake", tmp_path))
     assert "**fake.case**: 8 variants" in text and "the error stays under 1" in text
     assert "No sweep yet" in "\n".join(_robustness_section(tmp_path, "other", tmp_path))
+
+
+# ----------------------------------------------------------------- which unknown decides
+def test_best_split_finds_the_known_threshold() -> None:
+    from repro.runs.sweep_sensitivity import best_split
+
+    x = np.array([0.9, 0.1, 0.5, 0.3, 0.7, 0.2])
+    cut, side, acc = best_split(x, x < 0.4)
+    assert cut == pytest.approx(0.4) and side == "< 0.4" and acc == 1.0
+    cut, side, acc = best_split(x, x >= 0.6)  # the other orientation
+    assert cut == pytest.approx(0.6) and side.startswith(">=") and acc == 1.0
+    assert best_split(np.ones(4), np.array([1, 0, 1, 0], bool))[1] == "none"  # no cut exists
+    assert best_split(x, np.ones(6, bool)) == (pytest.approx(np.nan, nan_ok=True), "none", 1.0)
+
+
+def test_sensitivity_ranks_the_deciding_parameter_first(tmp_path: Path) -> None:
+    """A known answer: the claim holds iff 2 gain < 1, a second swept value decides nothing.
+    The gain ranks first with a tiny permutation p, the other does not decide it."""
+    from repro.runs.sweep_sensitivity import write_sensitivity
+
+    runner = Runner()
+    papers = _papers(runner)
+    exps = papers["fake"].experiments
+    papers = {"fake": Paper(key="fake", experiments=(Experiment(
+        name="case", paper="fake", description="two", config_cls=TwoCfg, run=runner),
+        exps[1]), claims=papers["fake"].claims)}
+    path = run_sweep("fake.case", 32, seed=4, results_dir=tmp_path, papers=papers)
+    sens = pd.read_csv(write_sensitivity(path.parent, "case"), dtype={"claim": str})
+    claim = sens[(sens["claim"] == "1") & sens["clause"].isna()].set_index("parameter")
+    assert claim.loc["gain", "rank"] == 1 and claim.loc["gain", "split_accuracy"] == 1.0
+    assert claim.loc["gain", "split_at"] == pytest.approx(0.5, abs=0.05)
+    assert claim.loc["gain", "permutation_p"] < 0.01 and claim.loc["other", "permutation_p"] > 0.05
+    assert claim.loc["gain", "spearman"] < -0.8  # holds at low gain
+    assert (path.parent / "sensitivity.csv").is_file()  # run_sweep writes it too

@@ -363,9 +363,42 @@ def _robustness_section(results_dir: Path, paper: str, base: Path) -> list[str]:
                 f"{_link(rates, base)}).", "",
                 markdown_table(("claim", "clause", "variants", "held", "rate", "Wilson 95 %",
                                 "canonical run"), rows), ""]
+        out += _deciders(rates.parent / "sensitivity.csv", base)
     if not found:
         out += ["_No sweep yet._", ""]
     return out
+
+
+#: A best split is reported as deciding a verdict when its permutation p-value is below this
+DECIDES_P = 0.05  # ours: the conventional 5 % (sensitivity.csv gives every p)
+
+
+def _deciders(path: Path, base: Path) -> list[str]:
+    """Issue 19: per claim and clause whose verdict varies over the sweep, the parameter
+    whose best single split predicts it best (sensitivity.csv, rank 1)."""
+    if not path.is_file():
+        return []
+    df = pd.read_csv(path, dtype={"claim": str, "clause": str}, keep_default_na=False)
+    top = df[df["rank"].astype(int) == 1]
+    if top.empty:
+        return ["Which unknown decides it: no verdict varies over these variants.", ""]
+    lines = [f"Which unknown decides it (best single split per verdict that varies, "
+             f"{_link(path, base)}; deciding when its permutation p < {DECIDES_P:g}):", ""]
+    for r in top.itertuples():
+        what = f"claim {r.claim}" + (f", \"{r.clause}\"" if r.clause else "")
+        p = float(r.permutation_p)
+        rho = f"{float(r.spearman):+.2f}" if r.spearman not in ("", "nan") else "-"
+        if r.holds_when == "none" or p >= DECIDES_P:
+            lines.append(f"- {what}: no swept parameter decides it alone (best: {r.parameter}, "
+                         f"split accuracy {float(r.split_accuracy):.2f} vs "
+                         f"{float(r.majority_accuracy):.2f} by the majority, p = {p:.2f}; "
+                         f"Spearman {rho})")
+        else:
+            lines.append(f"- {what}: **{r.parameter}** (holds when {r.parameter} "
+                         f"{r.holds_when}: accuracy {float(r.split_accuracy):.2f} vs "
+                         f"{float(r.majority_accuracy):.2f} by the majority, p = {p:.3f}; "
+                         f"Spearman {rho})")
+    return lines + [""]
 
 
 def _variation_note(results_dir: Path, paper: str) -> str:

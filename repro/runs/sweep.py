@@ -306,7 +306,31 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
                     "members": [m.id for m in sweep_members(exp, paper)],
                     "engine": engine,
                     "columns": _columns(exp, paper)}, indent=1) + "\n", encoding="utf-8")
-    from repro.runs.sweep_rates import write_rates
-
-    write_rates(sweep_dir, Path(results_dir), exp.paper, exp.name, paper.joint_claims)
+    _write_tables(sweep_dir, Path(results_dir), exp, paper)
     return path
+
+
+def _write_tables(sweep_dir: Path, results_dir: Path, exp: Experiment, paper: Paper
+                  ) -> list[Path]:
+    from repro.runs.sweep_rates import write_rates
+    from repro.runs.sweep_sensitivity import write_sensitivity
+
+    return [write_rates(sweep_dir, results_dir, exp.paper, exp.name, paper.joint_claims),
+            write_sensitivity(sweep_dir, exp.name)]
+
+
+def refresh_tables(results_dir: Path, papers: Mapping[str, Paper] | None = None) -> list[Path]:
+    """Rewrite every committed sweep's rates.csv and sensitivity.csv from its variants.csv
+    (``repro figures``: the canonical verdicts they quote come from the current
+    claims.csv); runs nothing."""
+    papers = registry.load_papers() if papers is None else papers
+    written: list[Path] = []
+    for meta_path in sorted((Path(results_dir) / SWEEPS_DIR).glob("*/variants.columns.json")):
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        try:
+            exp, paper = _experiment(str(meta.get("experiment")), papers)
+        except ReproError:
+            continue  # a sweep of an experiment no longer registered: left as it is
+        if (meta_path.parent / "variants.csv").is_file():
+            written += _write_tables(meta_path.parent, Path(results_dir), exp, paper)
+    return written
