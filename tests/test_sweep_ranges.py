@@ -143,18 +143,24 @@ def test_a_range_can_apply_to_one_scene_only() -> None:
         SweepRange(0.0, 1.0, when=("case", "a"), reason="a malformed condition")  # type: ignore[arg-type]
 
 
-def test_the_thomas2024_case1_layout_is_swept_in_case1_and_its_ablation_only() -> None:
+def test_each_thomas2024_scene_is_swept_in_its_own_experiments_only() -> None:
     from experiments.thomas2024 import config as c
 
-    layout = {"case1_turn_deg", "case1_right_lateral", "case1_left_lateral", "case1_right_top",
-              "case1_left_top", "case1_right_back", "case1_left_back", "case1_front"}
-    assert set(declared_ranges(c.Case1Config)) == layout | {"proximity_noise"}
+    case1 = {"case1_turn_deg", "case1_right_lateral", "case1_left_lateral", "case1_right_top",
+             "case1_left_top", "case1_right_back", "case1_left_back", "case1_front"}
+    case2 = {"case2_start_right_lateral", "case2_start_left_lateral", "case2_start_skew_deg",
+             "case2_v_lean_deg", "case2_v_ahead"}
+    case3 = {"case3_near_gap", "case3_duration_scale", "case3_aim_offset_deg"}
+    assert set(declared_ranges(c.Case1Config)) == case1 | {"proximity_noise"}
     assert declared_ranges(c.Case1NoProximityConfig) == declared_ranges(c.Case1Config)
-    assert set(declared_ranges(c.Case2Config)) == {"proximity_noise"}
+    assert set(declared_ranges(c.Case2Config)) == case2 | {"proximity_noise"}
+    assert declared_ranges(c.Case2CoarseConfig) == declared_ranges(c.Case2Config)
+    assert set(declared_ranges(c.Case3Config)) == case3 | {"proximity_noise"}
     assert not declared_ranges(c.ParallelConfig)  # noise-free by design: not swept
-    # every default inside its range (the canonical layout is one plausible scene)
-    d = c.Case1Config()
-    for name, rng in declared_ranges(c.Case1Config).items():
-        assert rng.low <= getattr(d, name) <= rng.high, name
+    # every default inside its range (the canonical scene is one plausible scene)
+    for cls in (c.Case1Config, c.Case2Config, c.Case3Config):
+        d = cls()
+        for name, rng in declared_ranges(cls).items():
+            assert rng.low <= getattr(d, name) <= rng.high, (cls.__name__, name)
     assert declared_ranges(c.Case1Config)["case1_right_lateral"].low == pytest.approx(
         0.07 + 0.08 + 0.005)  # ring 2's radius + its delta* + half a board

@@ -229,3 +229,40 @@ def test_case1_layout_fields_place_the_boards() -> None:
         sc.Case1Layout(), turn_deg=15.0))}
     n0, n1 = (p["right"].T_world[:3, 2] for p in (base, turned))  # the board's normal
     assert np.degrees(np.arccos(np.clip(n0 @ n1, -1, 1))) == pytest.approx(30.0)
+
+
+def test_case2_and_case3_fields_shape_their_scenes() -> None:
+    """The defaults are the committed scenes; the V's setback moves both V boards along
+    ring 2's axis by exactly the change; the hand's timing and aim follow their fields."""
+    from experiments.thomas2024 import scene as sc
+    from experiments.thomas2024.run import case2_layout, case3_hand, check_config
+
+    assert case2_layout(C.Case2Config()) == sc.Case2Layout()
+    T_goal = np.eye(4)
+    T_goal[:3, 3] = (0.5, -0.2, 0.53)
+    base = {p.name: p for p in sc.case2_planes(T_goal, 0.04)}
+    back = {p.name: p for p in sc.case2_planes(T_goal, 0.04, dataclasses.replace(
+        sc.Case2Layout(), v_ahead=-0.08))}
+    for name in ("goal_a", "goal_b"):
+        np.testing.assert_allclose(back[name].T_world[:3, 3] - base[name].T_world[:3, 3],
+                                   -0.03 * T_goal[:3, 2], atol=1e-12)
+    for name in ("start_right", "start_left"):  # the start boards do not move
+        np.testing.assert_array_equal(back[name].T_world, base[name].T_world)
+    skew = {p.name: p for p in sc.case2_planes(T_goal, 0.04, dataclasses.replace(
+        sc.Case2Layout(), start_skew_deg=10.0))}
+    n_r, n_l = (skew[k].T_world[:3, 2] for k in ("start_right", "start_left"))
+    assert np.degrees(np.arccos(np.clip(-n_r @ n_l, -1, 1))) == pytest.approx(10.0)
+    hand = sc.SCENES["case3"].hand
+    assert case3_hand(C.Case3Config(), hand) == hand
+    moved = case3_hand(dataclasses.replace(C.Case3Config(), case3_duration_scale=0.5,
+                                           case3_aim_offset_deg=30.0, case3_near_gap=0.01),
+                       hand)
+    for (r0, t0, d0, a0), (r1, t1, d1, a1) in zip(hand.approaches, moved.approaches,
+                                                  strict=True):
+        assert (r1, t1) == (r0, t0) and d1 == pytest.approx(d0 / 2)
+        assert a1 - a0 == pytest.approx(np.deg2rad(30.0))
+    assert moved.near_gap == 0.01
+    from repro.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="after the next starts"):
+        check_config(dataclasses.replace(C.Case3Config(), case3_duration_scale=1.5))

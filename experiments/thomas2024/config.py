@@ -42,6 +42,15 @@ LATERAL_WHY = ("from ring 2's threshold at the goal (0.07 m radius + 0.08 m delt
 TOP_WHY = ("Fig. 4b: the boards flank the final arm; the top edge from just above ring 2 at the "
            "goal (0.53 m + 0.07 m radius) to the flange's start height (0.98 m), above which "
            "a board is taller than the whole motion")
+CASE2 = (("case", "case2"),)
+CASE3 = (("case", "case3"),)
+#: ring 2's radius 0.07 m + case 2's delta* 0.04 m + half a board: a start board nearer
+#: than this to ring 2's start puts the start inside the threshold
+CASE2_LATERAL_MIN = 0.115
+START_WHY = ("Sec. V-B: the start boards form a passage the robot navigates 'while being very "
+             "close to the threshold distance' (Sec. VI: 'a narrow passage'): from ring 2's "
+             "threshold at its start (0.07 m radius + 0.04 m delta* + 5 mm half board) to "
+             "~13 cm beyond it")
 BACK_WHY = ("how far the board reaches back from the goal towards the start: from 15 cm "
             "(only ring 2's final stretch) to 50 cm (ring 2's whole horizontal path from its "
             "start, 0.50 m)")
@@ -121,6 +130,59 @@ class Thomas2024Config:
         sweep=SweepRange(0.10, 0.40, when=CASE1, reason=(
             "past ring 2's goal: from 10 cm (ring 2 and the camera) to 40 cm (beyond the "
             "target, 30 cm ahead of the camera, and its card)")))  # ours
+    # --- case 2's boards (used only when case == "case2"; scene.case2_planes)
+    case2_start_right_lateral: float = param(
+        0.22, unit="m", range=(0.0, 1.0),
+        help="right start board's centre plane from ring 2's start, across the corridor",
+        sweep=SweepRange(CASE2_LATERAL_MIN, 0.25, when=CASE2, reason=START_WHY))  # ours
+    case2_start_left_lateral: float = param(
+        0.16, unit="m", range=(0.0, 1.0),
+        help="left start board's centre plane from ring 2's start, across the corridor",
+        sweep=SweepRange(CASE2_LATERAL_MIN, 0.25, when=CASE2, reason=START_WHY))  # ours
+    case2_start_skew_deg: float = param(
+        0.0, unit="deg", range=(-45.0, 45.0),
+        help="angle between the start boards (each turned by half; > 0: they diverge "
+             "towards the goal)",
+        sweep=SweepRange(-10.0, 10.0, when=CASE2, reason=(
+            "Sec. V-B: 'aligned approximately parallel to each other': ours, 'approximately' "
+            "read as within 10 deg")))  # ours: parallel
+    case2_v_lean_deg: float = param(
+        35.0, unit="deg", range=(0.0, 90.0),
+        help="lean of each V board towards ring 2's axis (0: along the axis)",
+        sweep=SweepRange(15.0, 75.0, when=CASE2, reason=(
+            "Sec. V-B: the two boards 'are aligned with each other at an angle'; at 0 deg a "
+            "board runs along ring 2's axis (then the coarse model (6) is exact and Sec. VI's "
+            "eq. (24) contrast vanishes), at 90 deg it faces the ring head-on (a wall, not "
+            "a V): 15-75 deg, 15 deg clear of both")))  # ours
+    case2_v_ahead: float = param(
+        -0.05, unit="m", range=(-0.5, 0.5),
+        help="where the V's threshold surface meets ring 2's sensors 4 and 12, along the "
+             "ring's axis from its goal (< 0: before the goal)",
+        sweep=SweepRange(-0.10, -0.01, when=CASE2, reason=(
+            "Sec. V-B: the V is placed 'to stop convergence of e_4p before its global "
+            "minimum': before the goal, by at least 1 cm (5 noise std: a stop, not a "
+            "convergence) and at most 10 cm (the boards' 'closer to the final goal')")))  # ours
+    # --- case 3's hand (used only when case == "case3"; scene.hand_motion)
+    case3_near_gap: float = param(
+        0.03, unit="m", range=(0.0, 0.3),
+        help="the hand's face from the ring's rim at its nearest point",
+        sweep=SweepRange(0.01, 0.04, when=CASE3, reason=(
+            "Sec. V-C: at each approach 'proximity sensors ... reach close to virtual "
+            "contact': the hand comes inside both thresholds (ring 1's 4 cm), down to 1 cm "
+            "(a hand that nearly touches the ring)")))  # ours: under every threshold
+    case3_duration_scale: float = param(
+        1.0, range=(0.1, 2.0),
+        help="every approach's duration times this (start times kept)",
+        sweep=SweepRange(0.5, 1.03, when=CASE3, reason=(
+            "Fig. 9: four approaches in 5-18 s and four in 20-30 s; ring 2's last (14.9 s + "
+            "3.0 s) still ends by 18 s up to x1.03; down to half as long (a hand at ~0.45 "
+            "m/s, still a slow hand: Sec. VI warns of 'high speed moving obstacles')")))  # ours
+    case3_aim_offset_deg: float = param(
+        0.0, unit="deg", range=(-180.0, 180.0),
+        help="every approach direction turned by this about its ring's axis",
+        sweep=SweepRange(-45.0, 45.0, when=CASE3, reason=(
+            "the paper shows two approaches (Fig. 6c-d), not their directions: ours turned "
+            "together by up to half the 90 deg spacing of ring 2's four approaches")))  # ours
     # --- sensors
     camera_mode: str = param("render", choices=("render", "exact"),
                              help="render = PyBullet image + OpenCV; exact = projection")

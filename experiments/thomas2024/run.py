@@ -6,6 +6,7 @@ benchmarks; the loop itself is :func:`repro.sim.episode.run_episode`.
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,6 +55,16 @@ def check_config(config: Thomas2024Config) -> None:
     bad = [m for m in config.ring_models if m not in RING_MODELS]
     if bad:
         raise UnknownChoiceError("ring model", bad[0], RING_MODELS)
+    hand = sc.SCENES[config.case].hand
+    if hand is not None:
+        spans = sorted((t0, t0 + d * config.case3_duration_scale)
+                       for _, t0, d, _ in hand.approaches)
+        clash = [(a, b) for a, b in zip(spans, spans[1:], strict=False) if b[0] < a[1]]
+        if clash:
+            raise ConfigError(f"case3_duration_scale = {config.case3_duration_scale:g}: the "
+                              f"hand's approach at {clash[0][0][0]:g} s lasts until "
+                              f"{clash[0][0][1]:.2f} s, after the next starts "
+                              f"({clash[0][1][0]:g} s)")
     for side in ("right", "left"):
         length = getattr(config, f"case1_{side}_back") + config.case1_front
         if length < MIN_BOARD_M:
@@ -224,6 +235,21 @@ def case1_layout(config: Thomas2024Config) -> sc.Case1Layout:
                              for f in sc.Case1Layout.__dataclass_fields__})
 
 
+def case2_layout(config: Thomas2024Config) -> sc.Case2Layout:
+    """Case 2's board layout from the config's ``case2_*`` fields."""
+    return sc.Case2Layout(**{f: getattr(config, f"case2_{f}")
+                             for f in sc.Case2Layout.__dataclass_fields__})
+
+
+def case3_hand(config: Thomas2024Config, hand: sc.HandPath) -> sc.HandPath:
+    """Case 3's hand path with the config's ``case3_*`` fields: the nearest gap, every
+    approach's duration scaled, every direction turned (start times kept)."""
+    turn = np.deg2rad(config.case3_aim_offset_deg)
+    return dataclasses.replace(hand, near_gap=config.case3_near_gap, approaches=tuple(
+        (ring, t0, duration * config.case3_duration_scale, azimuth + turn)
+        for ring, t0, duration, azimuth in hand.approaches))
+
+
 def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024Controller]:
     """The scene, robot, sensors and controller of ``config.case``."""
     check_config(config)
@@ -240,14 +266,16 @@ def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024C
     T_ring2_goal = robot.frame_pose("ring2", q_goal)
     planes = {"parallel": lambda: sc.parallel_planes(T_ring2_goal, config.thresholds[1]),
               "case1": lambda: sc.case1_planes(T_ring2_goal, case1_layout(config)),
-              "case2": lambda: sc.case2_planes(T_ring2_goal, config.thresholds[1])
+              "case2": lambda: sc.case2_planes(T_ring2_goal, config.thresholds[1],
+                                               case2_layout(config))
               }.get(config.case, lambda: case.planes)()
     for pl in planes:
         scene.add_box(pl.name, (*pl.size, pl.thickness), pl.T_world, BOARD_RGBA)
     movers = {}
     if case.hand is not None:
-        scene.add_box("hand", case.hand.size, sc.PARKED_HAND, HAND_RGBA, moving=True)
-        movers["hand"] = sc.hand_motion(case.hand, {n: robot.frame_pose(n, np.deg2rad(
+        hand = case3_hand(config, case.hand)
+        scene.add_box("hand", hand.size, sc.PARKED_HAND, HAND_RGBA, moving=True)
+        movers["hand"] = sc.hand_motion(hand, {n: robot.frame_pose(n, np.deg2rad(
             config.q0_deg)) for n in RING_NAMES})
     T_target = sc.target_pose(T_goal_cam, case.target_depth)
     scene.add_dot_target("target", case.target, T_target)

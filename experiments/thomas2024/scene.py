@@ -247,19 +247,39 @@ def case1_planes(T_world_ring2_goal: np.ndarray, layout: Case1Layout = Case1Layo
     return tuple(boards)
 
 
-CASE2_START_BOARDS = (
-    corridor_plane("start_right", -0.30, 0.20, -0.22, 0.55, 1.05),  # ours
-    corridor_plane("start_left", -0.30, 0.20, 0.16, 0.55, 1.05),  # ours
-)
+@dataclass(frozen=True)
+class Case2Layout:
+    """Case 2's four boards (Sec. V-B, Fig. 5; every number ours: the config's ``case2_*``
+    fields, swept in issue 19). Two start boards in corridor coordinates (see
+    :func:`corridor_plane`), ``*_lateral`` [m] to the right / left of ring 2's start, turned
+    by -skew/2 / +skew/2 [deg] about the vertical (skew > 0: they diverge towards the goal);
+    and a V facing ring 2's sensors 4 and 12 at its goal pose, each board leaning by
+    ``v_lean_deg`` towards the ring's axis, its face at ring 2's threshold from the sensor
+    ``v_ahead`` [m] along the ring's axis from the goal (< 0: before it)."""
+
+    start_right_lateral: float = 0.22
+    start_left_lateral: float = 0.16
+    start_skew_deg: float = 0.0
+    v_lean_deg: float = 35.0
+    v_ahead: float = -0.05
 
 
-def case2_planes(T_world_ring2_goal: np.ndarray, threshold: float) -> tuple[Plane, ...]:
+def case2_planes(T_world_ring2_goal: np.ndarray, threshold: float,
+                 layout: Case2Layout = Case2Layout()) -> tuple[Plane, ...]:
     """Case 2 boards: the start pair and a V in front of ring 2's goal pose that faces
-    sensors 4 and 12 and stops ring 2 ~5 cm before the goal."""
-    ahead = -0.05  # ours: where the V stops ring 2, along its axis from the goal [m]
-    return CASE2_START_BOARDS + (
-        blocking_plane("goal_a", T_world_ring2_goal, 4, threshold, 35.0, ahead, (0.25, 0.3)),  # ours
-        blocking_plane("goal_b", T_world_ring2_goal, 12, threshold, 35.0, ahead, (0.25, 0.3)),  # ours
+    sensors 4 and 12 and (by default) stops ring 2 ~5 cm before the goal."""
+    half = layout.start_skew_deg / 2
+    start = (
+        corridor_plane("start_right", -0.30, 0.20, -layout.start_right_lateral, 0.55, 1.05,
+                       -half),  # ours: s and z extents
+        corridor_plane("start_left", -0.30, 0.20, layout.start_left_lateral, 0.55, 1.05,
+                       half),  # ours
+    )
+    return start + (
+        blocking_plane("goal_a", T_world_ring2_goal, 4, threshold, layout.v_lean_deg,
+                       layout.v_ahead, (0.25, 0.3)),  # ours: 25 x 30 cm
+        blocking_plane("goal_b", T_world_ring2_goal, 12, threshold, layout.v_lean_deg,
+                       layout.v_ahead, (0.25, 0.3)),  # ours
     )
 
 
