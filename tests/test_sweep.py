@@ -27,6 +27,7 @@ from repro.runs.trace import RunFiles
 from repro.sweep_ranges import SweepRange, sample_variants
 
 BOUND = 1.0  # the claim: the error stays under 1 (holds for gain < 0.5)
+RENDER_BIAS = 0.2  # the fake rendered camera reads 0.2 more: verdicts differ for gain in [0.4, 0.5)
 
 
 @dataclass(frozen=True)
@@ -54,7 +55,8 @@ class Runner:
             raise SolverError(f"no solution at gain {config.gain}")
         out_dir.mkdir(parents=True, exist_ok=True)
         t = np.arange(5) * 0.1
-        pd.DataFrame({"t": t, "err": 2.0 * config.gain * np.ones(5)}).to_csv(
+        bias = RENDER_BIAS if config.camera_mode == "render" else 0.0
+        pd.DataFrame({"t": t, "err": (2.0 * config.gain + bias) * np.ones(5)}).to_csv(
             out_dir / "trace.csv", index=False)
         (out_dir / "events.csv").write_text("t,step,kind,detail\n")
         (out_dir / "manifest.json").write_text(json.dumps({
@@ -351,3 +353,30 @@ def test_sensitivity_ranks_the_deciding_parameter_first(tmp_path: Path) -> None:
     assert claim.loc["gain", "permutation_p"] < 0.01 and claim.loc["other", "permutation_p"] > 0.05
     assert claim.loc["gain", "spearman"] < -0.8  # holds at low gain
     assert (path.parent / "sensitivity.csv").is_file()  # run_sweep writes it too
+
+
+def test_a_rendered_subsample_is_compared_with_its_exact_twins(tmp_path: Path) -> None:
+    """The rendered-camera sweep goes to <exp>/render/; render_agreement.csv counts the twin
+    variants (same values) whose verdicts agree: here all but those with gain in [0.4, 0.5),
+    where the fake rendered camera's bias flips the verdict."""
+    from repro.runs.report import _robustness_section
+
+    papers = _papers(Runner())
+    run_sweep("fake.case", 32, seed=6, results_dir=tmp_path, papers=papers)
+    path = run_sweep("fake.case", 12, seed=6, results_dir=tmp_path, camera="render",
+                     papers=papers)
+    assert path == tmp_path / "sweeps" / "case" / "render" / "variants.csv"
+    agreement = pd.read_csv(tmp_path / "sweeps" / "case" / "render_agreement.csv",
+                            dtype={"claim": str})
+    claim = agreement[agreement["clause"].isna()].iloc[0]
+    gains = np.array([v["gain"] for v in sample_variants(GainCfg, 12, seed=6)])
+    flips = int(((gains >= 0.4) & (gains < 0.5)).sum())
+    assert claim["twins"] == 12 and claim["agree"] == 12 - flips and 0 < flips < 12
+    assert claim["exact_held"] == int((gains < 0.5).sum())
+    assert claim["render_held"] == int((gains < 0.4).sum())
+    # the exact sweep's own table is untouched by the rendered one
+    assert len(pd.read_csv(tmp_path / "sweeps" / "case" / "variants.csv")) == 32
+    (tmp_path / "sweeps" / "case" / "variants.columns.json").write_text(json.dumps(
+        {"experiment": "fake.case", "n": 32, "seed": 6, "camera": "exact"}))
+    text = "\n".join(_robustness_section(tmp_path, "fake", tmp_path))
+    assert f"{2 * 12 - 2 * flips} of 24 verdicts agree" in text

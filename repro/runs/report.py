@@ -364,6 +364,7 @@ def _robustness_section(results_dir: Path, paper: str, base: Path) -> list[str]:
                 markdown_table(("claim", "clause", "variants", "held", "rate", "Wilson 95 %",
                                 "canonical run"), rows), ""]
         out += _deciders(rates.parent / "sensitivity.csv", base)
+        out += _agreement(rates.parent / "render_agreement.csv", base)
     if not found:
         out += ["_No sweep yet._", ""]
     return out
@@ -399,6 +400,24 @@ def _deciders(path: Path, base: Path) -> list[str]:
                          f"{float(r.majority_accuracy):.2f} by the majority, p = {p:.3f}; "
                          f"Spearman {rho})")
     return lines + [""]
+
+
+def _agreement(path: Path, base: Path) -> list[str]:
+    """Issue 19 item 5: the rendered-camera subsample's verdicts against their exact twins."""
+    if not path.is_file():
+        return ["Rendered-camera subsample: not run yet (exact camera only).", ""]
+    df = pd.read_csv(path, dtype={"claim": str, "clause": str}, keep_default_na=False)
+    if df.empty:
+        return [f"Rendered-camera subsample: no twin variants ({_link(path, base)}).", ""]
+    agree, n = int(df["agree"].astype(int).sum()), int(df["twins"].astype(int).sum())
+    twins = int(df["twins"].astype(int).max())
+    rows = [(r.claim, r.clause or "(the claim)", r.twins, r.agree,
+             f"{float(r.rate):.2f}" if r.rate else "-", r.exact_held, r.render_held)
+            for r in df.itertuples()]
+    return [f"Rendered camera against the exact projection ({twins} twin variants, "
+            f"{_link(path, base)}): {agree} of {n} verdicts agree.", "",
+            markdown_table(("claim", "clause", "twins", "agree", "rate", "held (exact)",
+                            "held (render)"), rows), ""]
 
 
 def _variation_note(results_dir: Path, paper: str) -> str:

@@ -284,7 +284,7 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
     if not sweep_claims(exp, paper):
         raise ConfigError(f"{exp.id}: no claim of {exp.paper} needs only this run")
     variants = sample_variants(exp.config_cls, n, seed)
-    sweep_dir = Path(results_dir) / SWEEPS_DIR / exp.name
+    sweep_dir = sweep_folder(Path(results_dir), exp, camera)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     if engine == "dask":
         rows = _map_dask(exp.id, variants, camera, sweep_dir, keep_traces, papers, scheduler,
@@ -310,13 +310,28 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
     return path
 
 
+#: Sub-folder of a sweep's folder holding its rendered-camera subsample (item 5)
+RENDER_DIR = "render"
+
+
+def sweep_folder(results_dir: Path, exp: Experiment, camera: str | None) -> Path:
+    """``<results>/sweeps/<exp>/``, or its ``render/`` sub-folder for a rendered-camera
+    sweep (the subsample whose verdicts are compared with their exact-camera twins)."""
+    base = Path(results_dir) / SWEEPS_DIR / exp.name
+    return base / RENDER_DIR if camera == "render" else base
+
+
 def _write_tables(sweep_dir: Path, results_dir: Path, exp: Experiment, paper: Paper
                   ) -> list[Path]:
-    from repro.runs.sweep_rates import write_rates
+    from repro.runs.sweep_rates import write_agreement, write_rates
     from repro.runs.sweep_sensitivity import write_sensitivity
 
-    return [write_rates(sweep_dir, results_dir, exp.paper, exp.name, paper.joint_claims),
-            write_sensitivity(sweep_dir, exp.name)]
+    out = [write_rates(sweep_dir, results_dir, exp.paper, exp.name, paper.joint_claims),
+           write_sensitivity(sweep_dir, exp.name)]
+    exact = sweep_dir.parent if sweep_dir.name == RENDER_DIR else sweep_dir
+    if (exact / RENDER_DIR / "variants.csv").is_file() and (exact / "variants.csv").is_file():
+        out.append(write_agreement(exact, exact / RENDER_DIR, exp.name))
+    return out
 
 
 def refresh_tables(results_dir: Path, papers: Mapping[str, Paper] | None = None) -> list[Path]:
@@ -325,7 +340,9 @@ def refresh_tables(results_dir: Path, papers: Mapping[str, Paper] | None = None)
     claims.csv); runs nothing."""
     papers = registry.load_papers() if papers is None else papers
     written: list[Path] = []
-    for meta_path in sorted((Path(results_dir) / SWEEPS_DIR).glob("*/variants.columns.json")):
+    root = Path(results_dir) / SWEEPS_DIR
+    for meta_path in sorted([*root.glob("*/variants.columns.json"),
+                             *root.glob(f"*/{RENDER_DIR}/variants.columns.json")]):
         meta = json.loads(meta_path.read_text(encoding="utf-8"))
         try:
             exp, paper = _experiment(str(meta.get("experiment")), papers)

@@ -18,7 +18,8 @@ import pandas as pd
 
 from repro.errors import ReproError
 
-__all__ = ["RATES_COLUMNS", "wilson_interval", "write_rates"]
+__all__ = ["AGREEMENT_COLUMNS", "RATES_COLUMNS", "wilson_interval", "write_agreement",
+           "write_rates"]
 
 RATES_COLUMNS = ("experiment", "claim", "clause", "variants", "held", "rate", "wilson_low",
                  "wilson_high", "failed_runs", "canonical")
@@ -113,4 +114,44 @@ def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str,
     out = sweep_dir / "rates.csv"
     pd.DataFrame(rows, columns=list(RATES_COLUMNS)).to_csv(out, index=False,
                                                            float_format="%.6g")
+    return out
+
+
+AGREEMENT_COLUMNS = ("experiment", "claim", "clause", "twins", "agree", "rate", "wilson_low",
+                     "wilson_high", "exact_held", "render_held")
+
+
+def write_agreement(exact_dir: Path, render_dir: Path, experiment: str) -> Path:
+    """``exact_dir / render_agreement.csv``: per claim and clause, over the variants run with
+    both cameras (twins: the same parameter values, matched on every ``p.`` column), how
+    many verdicts the rendered camera and the exact projection agree on."""
+    ex = pd.read_csv(Path(exact_dir) / "variants.csv")
+    re_ = pd.read_csv(Path(render_dir) / "variants.csv")
+    params = sorted(c for c in ex.columns if c.startswith("p.") and c in re_.columns)
+    ex, re_ = (d[d["run_status"] != "failed"] for d in (ex, re_))
+    key = ex[params].round(12).astype(str).agg("|".join, axis=1)
+    rkey = re_[params].round(12).astype(str).agg("|".join, axis=1)
+    twins = ex.assign(_k=key).merge(re_.assign(_k=rkey), on="_k", suffixes=("", "@render"))
+    names = _clause_names(Path(exact_dir))
+    rows = []
+    for col in [c for c in ex.columns if c.startswith("claim") and
+                (c.endswith(".status") or c.endswith(".holds"))]:
+        if f"{col}@render" not in twins.columns:
+            continue
+        a = twins[col].astype(str).str.lower()
+        b = twins[f"{col}@render"].astype(str).str.lower()
+        ok = ~a.isin(["nan", ""]) & ~b.isin(["nan", ""])
+        k, n = int((a[ok] == b[ok]).sum()), int(ok.sum())
+        lo, hi = wilson_interval(k, n)
+        cid = col.split(".", 1)[0][len("claim"):]
+        if col.endswith(".status"):
+            clause, good = "", ("reproduced",)
+        else:
+            j = int(col.split(".")[1][1:])
+            clause, good = names.get((cid, j), f"clause {j}"), ("true",)
+        rows.append((experiment, cid, clause, n, k, k / n if n else math.nan, lo, hi,
+                     int(a[ok].isin(good).sum()), int(b[ok].isin(good).sum())))
+    out = Path(exact_dir) / "render_agreement.csv"
+    pd.DataFrame(rows, columns=list(AGREEMENT_COLUMNS)).to_csv(out, index=False,
+                                                               float_format="%.6g")
     return out
