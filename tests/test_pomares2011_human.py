@@ -193,3 +193,27 @@ def test_mini_robot_task_jacobian_matches_finite_differences(chain: Robot, seed:
         fd[:, k] = (s_of(q + dq) - s_of(q - dq)) / (2 * h)
     assert np.abs(fd).max() > 100.0  # px/rad: the dots do move
     np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-3)
+
+
+def test_the_operators_visit_follows_its_swept_fields() -> None:
+    """Issue 19: experiment 2's hand gap and entry time are config fields; the defaults are
+    the committed visit, the gap moves only the approach point, t_enter shifts every time,
+    and experiment 1's config does not carry them (its hash unchanged)."""
+    import dataclasses
+
+    from experiments.pomares2011 import config as c
+    from repro.sweep_ranges import declared_ranges
+
+    d = c.Exp2Config()
+    assert sc.human_path(d.human_gap, d.human_t_enter) == sc.HUMAN_PATH
+    near = sc.human_path(0.05, 8.0)
+    assert near.approach[1] - sc.HUMAN_PATH.approach[1] == pytest.approx(0.07)
+    assert near.approach[0::2] == sc.HUMAN_PATH.approach[0::2]
+    late = sc.human_path(0.12, 10.0)
+    for name in ("t_enter", "t_reach", "t_hold", "t_leave"):
+        assert getattr(late, name) - getattr(sc.HUMAN_PATH, name) == pytest.approx(2.0)
+    assert dataclasses.replace(late, t_enter=8.0, t_reach=11.5, t_hold=14.0,
+                               t_leave=19.0) == sc.HUMAN_PATH
+    assert {"human_gap", "human_t_enter"} <= set(declared_ranges(c.Exp2NoSecondaryConfig))
+    assert not {"human_gap", "human_t_enter"} & {f.name for f in
+                                                 dataclasses.fields(c.Exp1Config)}

@@ -51,4 +51,6 @@ EXPERIMENTS = Paper(
     figures=lazy("experiments.pomares2011.figures", "make_figures"),
     claims=lazy("experiments.pomares2011.claims", "CLAIMS"),
     bench=lazy("experiments.pomares2011.bench", "bench"),
+    # claim 4 compares experiment 2 with and without (17) on the same visit of the operator
+    sweep_groups={"exp2": ("exp2_no_secondary",)},
 )

@@ -102,6 +102,24 @@ class Exp2Config(Pomares2011Config):
     experiment: str = param("exp2", choices=EXPERIMENTS,
                             help="exp1: approach, no human; exp2: a human enters (Sec. 7.2)")
     human: bool = param(True, help="the operator of experiment 2 enters the workspace")
+    # --- the operator's visit of experiment 2 (scene.human_path; experiment 2 only, so
+    # that experiment 1's config and its hash do not carry them)
+    human_gap: float = param(
+        0.12, unit="m", range=(0.0, 1.0),
+        help="where the reaching hand's tip stops: this far beside the mini-robot camera's "
+             "goal point, on the operator's side",
+        sweep=SweepRange(0.05, 0.25, reason=(
+            "Sec. 7.2: the human 'enters within the robot workspace' and the avoidance acts: "
+            "the hand tip stops inside the smallest d_min swept (0.2 m) of the mini-robot's "
+            "camera, from 5 cm (nearly touching it) to 25 cm")))  # ours: 0.12 m (scene.HUMAN_PATH)
+    human_t_enter: float = param(
+        8.0, unit="s", range=(0.0, 60.0),
+        help="when the operator starts walking in (reach, hold and leave follow 3.5, 6 and "
+             "11 s later)",
+        sweep=SweepRange(6.0, 10.0, reason=(
+            "Sec. 7.2: the human enters 'during the approaching phase', when the manipulator "
+            "'is near its desired location': from 6 s (the RVC error at 1/6 of its start, 46 "
+            "of 281 px, measured on exp1) to 10 s (13 px, the approach nearly done)")))  # ours
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ import numpy as np
 
 from experiments.pomares2011 import scene as sc
 from experiments.pomares2011.columns import declare_columns
-from experiments.pomares2011.config import Pomares2011Config
+from experiments.pomares2011.config import Exp2Config, Pomares2011Config
 from experiments.pomares2011.controller import Pomares2011Controller
 from experiments.pomares2011.human_tracking import Bones
 from experiments.pomares2011.learning import learn_s_u_star
@@ -68,7 +68,9 @@ def build_parts(config: Pomares2011Config, out_dir: Path,
     dt = 1.0 / config.physics_rate
     scene = Scene(WorldConfig(physics_dt=dt, control_dt=dt),
                   render=config.camera_mode == "render", run_dir=out_dir)
-    human = sc.human_motion() if config.human else None
+    path = (sc.human_path(config.human_gap, config.human_t_enter)
+            if isinstance(config, Exp2Config) else sc.HUMAN_PATH)
+    human = sc.human_motion(path) if config.human else None
     chain, bodies = sc.build_scene(scene, layout.q_start, human=human)
     if extra_bodies is not None:
         extra_bodies(scene)

@@ -37,6 +37,7 @@ the PA-10 at its goal (elsewhere the mini-robot can only approach it).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -315,9 +316,25 @@ HUMAN_PATH = HumanPath(start=(0.55, -2.2), approach=(0.55, -0.272, 0.182 - FLOOR
 HUMAN_RGBA = (0.62, 0.58, 0.55, 1.0)
 
 
-def human_motion() -> HumanMotion:
+#: The camera's goal point the hand approaches (HUMAN_PATH.approach without the gap) [m]
+HUMAN_TARGET = (0.55, -0.152, 0.182)
+HUMAN_GAP = 0.12  # ours: the hand tip's default distance beside HUMAN_TARGET [m]
+
+
+def human_path(gap: float = HUMAN_GAP, t_enter: float = HUMAN_PATH.t_enter) -> HumanPath:
+    """HUMAN_PATH with the hand tip ``gap`` [m] beside the camera's goal point (towards the
+    operator, -y) and every time shifted so that the walk starts at ``t_enter`` [s]."""
+    shift = t_enter - HUMAN_PATH.t_enter
+    x, y, z = HUMAN_TARGET
+    return dataclasses.replace(
+        HUMAN_PATH, approach=(x, y - gap, z - FLOOR_Z),
+        t_enter=HUMAN_PATH.t_enter + shift, t_reach=HUMAN_PATH.t_reach + shift,
+        t_hold=HUMAN_PATH.t_hold + shift, t_leave=HUMAN_PATH.t_leave + shift)
+
+
+def human_motion(path: HumanPath = HUMAN_PATH) -> HumanMotion:
     """The scripted operator of experiment 2 (Winter-fraction skeleton, tight radii)."""
-    return HumanMotion(HUMAN_PATH, HumanBody(), T_world_base=trans(0.0, 0.0, FLOOR_Z))
+    return HumanMotion(path, HumanBody(), T_world_base=trans(0.0, 0.0, FLOOR_Z))
 
 
 def mini_capsules(chain: Robot, q: np.ndarray) -> list[tuple[str, Capsule]]:
