@@ -1,5 +1,8 @@
 """``make bench``: timings of every paper's benchmarks -> results/bench.csv.
 
+The ``sweep.*`` rows (issue 19): variants per hour of a short sweep on 1 and 2 workers and
+the speed-up between them, and of every committed sweep.
+
 Speed is measured here, not asserted in tests. Columns: benchmark, median_s,
 p95_s, n, machine (CPU model and core count). The ``real_time_factor`` rows (simulated time
 over the loop's wall time) and ``loop_split`` rows (each part's share of it) are ratios in
@@ -79,6 +82,48 @@ def realtime_rows(only_paper: str | None = None) -> list[dict[str, object]]:
     return rows
 
 
+#: The sweep timed with 1 and 2 LocalCluster workers (issue 19 item 6): (experiment, variants).
+#: ours: thomas2024 case 1 with its ablation (~5 s a pair): 12 variants keep both timings
+#: under ~2 minutes, and 6 per worker amortise the cluster's start-up.
+SWEEP_BENCH = ("thomas2024.case1", 12)
+
+
+def sweep_rows(results_dir: Path, workers: tuple[int, ...] = (1, 2)) -> list[dict[str, object]]:
+    """Rows ``sweep.<exp>.variants_per_hour[<k> workers]`` (wall time of the whole sweep,
+    cluster start-up included, in ``median_s`` as variants per hour), the speed-up of the
+    most workers over one, and ``sweep.<exp>.variants_per_hour[committed]`` for every
+    committed sweep (its variants' summed wall times over its workers)."""
+    import json
+    import tempfile
+    import time
+
+    from repro.runs.sweep import run_sweep
+
+    rows: list[dict[str, object]] = []
+    exp_id, n = SWEEP_BENCH
+    per_hour = {}
+    for k in workers:
+        with tempfile.TemporaryDirectory() as d:
+            tic = time.perf_counter()
+            run_sweep(exp_id, n, 0, Path(d), engine="dask", workers=k)
+            wall = time.perf_counter() - tic
+        per_hour[k] = 3600.0 * n / wall
+        rows.append({"benchmark": f"sweep.{exp_id}.variants_per_hour[{k} workers]",
+                     "median_s": per_hour[k], "p95_s": per_hour[k], "n": n})
+    if len(per_hour) > 1:  # (workers=() times nothing: the committed sweeps' rows only)
+        ratio = per_hour[max(per_hour)] / per_hour[min(per_hour)]
+        rows.append({"benchmark": f"sweep.{exp_id}.speedup[{max(per_hour)} over "
+                     f"{min(per_hour)} workers]", "median_s": ratio, "p95_s": ratio, "n": n})
+    for csv in sorted((Path(results_dir) / "sweeps").glob("*/variants.csv")):
+        meta = json.loads((csv.parent / "variants.columns.json").read_text(encoding="utf-8"))
+        df = pd.read_csv(csv)
+        k = int(meta.get("workers") or 2)  # ours: the sweeps before issue 19's bench ran -j 2
+        rate = 3600.0 * len(df) * k / float(df["wall_time_s"].sum())
+        rows.append({"benchmark": f"sweep.{meta['experiment']}.variants_per_hour[committed]",
+                     "median_s": rate, "p95_s": rate, "n": len(df)})
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m repro.bench")
     parser.add_argument("--results", type=Path, default=Path("results"))
@@ -87,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     machine = f"{cpu_name()} ({os.cpu_count()} cores)"
     rows: list[dict[str, object]] = []
     rows += [{**r, "machine": machine} for r in realtime_rows(args.paper)]
+    if not args.paper:
+        rows += [{**r, "machine": machine} for r in sweep_rows(args.results)]
     for key, paper in load_papers().items():
         if paper.bench is None or (args.paper and key != args.paper):
             continue

@@ -380,3 +380,19 @@ def test_a_rendered_subsample_is_compared_with_its_exact_twins(tmp_path: Path) -
         {"experiment": "fake.case", "n": 32, "seed": 6, "camera": "exact"}))
     text = "\n".join(_robustness_section(tmp_path, "fake", tmp_path))
     assert f"{2 * 12 - 2 * flips} of 24 verdicts agree" in text
+
+
+def test_bench_rates_a_committed_sweep_from_its_wall_times(tmp_path: Path) -> None:
+    """make bench's committed-sweep row: variants x workers / summed wall time, per hour."""
+    from repro.bench import sweep_rows
+
+    d = tmp_path / "sweeps" / "case"
+    d.mkdir(parents=True)
+    pd.DataFrame({"variant": [0, 1], "run_status": ["completed"] * 2,
+                  "wall_time_s": [10.0, 20.0]}).to_csv(d / "variants.csv", index=False)
+    (d / "variants.columns.json").write_text(json.dumps({"experiment": "fake.case",
+                                                          "workers": 2}))
+    rows = sweep_rows(tmp_path, workers=())
+    assert rows == [{"benchmark": "sweep.fake.case.variants_per_hour[committed]",
+                     "median_s": pytest.approx(3600 * 2 * 2 / 30), "p95_s": pytest.approx(480),
+                     "n": 2}]

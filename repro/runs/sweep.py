@@ -305,6 +305,8 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
         json.dumps({"experiment": exp.id, "n": n, "seed": seed, "camera": camera,
                     "members": [m.id for m in sweep_members(exp, paper)],
                     "engine": engine,
+                    "workers": (1 if engine == "serial" else
+                                workers or (None if scheduler else os.cpu_count())),
                     "columns": _columns(exp, paper)}, indent=1) + "\n", encoding="utf-8")
     _write_tables(sweep_dir, Path(results_dir), exp, paper)
     return path
