@@ -396,3 +396,23 @@ def test_bench_rates_a_committed_sweep_from_its_wall_times(tmp_path: Path) -> No
     assert rows == [{"benchmark": "sweep.fake.case.variants_per_hour[committed]",
                      "median_s": pytest.approx(3600 * 2 * 2 / 30), "p95_s": pytest.approx(480),
                      "n": 2}]
+
+
+def _check_each(runs: dict[str, RunFiles]) -> ClaimResult:
+    clauses = [Clause(f"{name}: the error stays under 1", float(run.trace["err"].max()), "<",
+                      BOUND, "-", "ours: a test bound") for name, run in sorted(runs.items())]
+    return ClaimResult.from_clauses("per run", clauses)
+
+
+def test_a_per_run_claim_is_judged_on_the_swept_run_alone(tmp_path: Path) -> None:
+    base = _papers(Runner())["fake"]
+    claims = (Claim("fake", "3", "each run's error under 1", "< 1", ("case", "other"),
+                    _check_each, per_run=("case", "other")),)
+    papers = {"fake": Paper(key="fake", experiments=base.experiments, claims=lambda: claims)}
+    path = run_sweep("fake.case", 4, seed=0, results_dir=tmp_path, papers=papers)
+    df = pd.read_csv(path)
+    assert "claim3.c1.holds" in df.columns and "claim3.c2.holds" not in df.columns
+    names = json.loads(next((path.parent / "variants").glob("*/" + VERDICTS_FILE)).read_text())
+    assert names["verdicts"]["3"]["clauses"][0]["name"] == "case: the error stays under 1"
+    with pytest.raises(ConfigError, match="per_run names"):
+        Claim("fake", "4", "x", "-", ("case",), _check_each, per_run=("other",))

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from repro.config import param
+from repro.sweep_ranges import SweepRange
 
 SETTINGS = ("simulation", "experiment")
 CONTROLLERS = ("nmpc", "ibvs", "ibvs_saturated")
@@ -12,6 +13,10 @@ CONTROLLERS = ("nmpc", "ibvs", "ibvs_saturated")
 # Allowed ranges (ours: what is physically meaningful for this robot and camera).
 DURATION_RANGE = (0.01, 600.0)  # [s]: at least one 10 ms MPC step, at most 10 minutes
 SEED_RANGE = (0, 2**32 - 1)  # numpy SeedSequence entropy: any 32-bit unsigned integer
+SIMULATION = (("setting", "simulation"),)
+ESTIMATE_WHY = ("Sec. III-A prints one estimate (3.0 cm and 14.1 deg off at the conrod's "
+                "centroid); around it, from an exact estimate (0) to about the experiment's "
+                "user estimate (Sec. V-A3: 7.3 cm and 46 deg off, 2.4x and 3.3x): 0-3x")
 
 
 @dataclass(frozen=True)
@@ -58,6 +63,17 @@ class Chan2011Config:
     snapshot_period: float = param(0.0, unit="s", range=(0.0, 600.0),
                                    help="save camera and scene images every ... s (0: none; "
                                         "at most the longest duration)")
+    # --- the pose-estimate error (swept in the simulation setting, issue 19)
+    estimate_translation_scale: float = param(
+        1.0, range=(0.0, 10.0),
+        help="the estimated object pose's translation error (of its frame's origin, in the "
+             "object's frame) as a multiple of the setting's (Sec. III-A: 2.4 cm)",
+        sweep=SweepRange(0.0, 3.0, when=SIMULATION, reason=ESTIMATE_WHY))  # the paper's: 1
+    estimate_rotation_scale: float = param(
+        1.0, range=(0.0, 10.0),
+        help="the estimated object pose's rotation error (its angle, about the same axis) as a "
+             "multiple of the setting's (Sec. III-A: 14.1 deg)",
+        sweep=SweepRange(0.0, 3.0, when=SIMULATION, reason=ESTIMATE_WHY))  # the paper's: 1
     seed: int = param(0, range=SEED_RANGE, help="seed (no random element yet; 32-bit)")
     video: bool = param(False, help="also write an animated GIF of the run (video.gif)",
                         output_only=True)

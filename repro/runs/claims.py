@@ -241,6 +241,10 @@ class Claim:
     #: event kinds that end a run with its task complete (a convergence stop): such a run
     #: counts as whole for ``whole_run``
     done_events: tuple[str, ...] = ()
+    #: runs of ``runs`` the claim can be judged on alone, each with its own clauses (the
+    #: check judges the runs it is given): a sweep of one of them judges this part of the
+    #: claim (:func:`repro.runs.sweep.sweep_claims`); the canonical verdict needs them all
+    per_run: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("paper", "claim"):
@@ -271,6 +275,12 @@ class Claim:
         if unknown:
             raise ConfigError(
                 f"claim whole_run names {unknown}, which are not among its runs {list(self.runs)}"
+            )
+        object.__setattr__(self, "per_run", tuple(self.per_run))
+        unknown = [run for run in self.per_run if run not in self.runs]
+        if unknown:
+            raise ConfigError(
+                f"claim per_run names {unknown}, which are not among its runs {list(self.runs)}"
             )
 
 

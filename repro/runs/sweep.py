@@ -70,11 +70,20 @@ def sweep_members(exp: Experiment, paper: Paper) -> tuple[Experiment, ...]:
 
 
 def sweep_claims(exp: Experiment, paper: Paper) -> list[Claim]:
-    """The paper's claims that need no run but ``exp`` and its sweep partners
-    (:func:`sweep_members`), judged on each variant."""
+    """The paper's claims judged on each variant: those that need no run but ``exp`` and its
+    sweep partners (:func:`sweep_members`), and those judged per run (``Claim.per_run``) on
+    the members among their runs (their clauses of those runs only)."""
     names = {m.name for m in sweep_members(exp, paper)}
     claims = list(paper.claims()) if paper.claims is not None else []
-    return [c for c in claims if c.runs and set(c.runs) <= names]
+    return [c for c in claims if c.runs and (set(c.runs) <= names or set(c.per_run) & names)]
+
+
+def _claim_runs(claim: Claim, runs: Mapping[str, Any]) -> dict[str, Any]:
+    """The runs of ``runs`` a claim is judged on in a sweep: all of its runs, or, judged per
+    run, its ``per_run`` runs among them."""
+    if set(claim.runs) <= set(runs):
+        return {n: runs[n] for n in claim.runs}
+    return {n: runs[n] for n in claim.per_run if n in runs}
 
 
 def variant_config(exp: Experiment, overrides: Mapping[str, Any], camera: str | None) -> Any:
@@ -101,15 +110,16 @@ def _judge(claims: Sequence[Claim], run_dirs: Mapping[str, Path]) -> dict[str, A
     runs = {name: load_run(d) for name, d in run_dirs.items()}
     out: dict[str, Any] = {}
     for claim in claims:
+        mine = _claim_runs(claim, runs)
         try:
-            res = claim.check(runs)
+            res = claim.check(mine)
         except Exception as exc:  # one broken variant must not end the sweep
             out[claim.claim] = {"status": "not_run", "error": f"{type(exc).__name__}: {exc}",
                                 "clauses": []}
             continue
         if not isinstance(res, ClaimResult):
             raise ReproError(f"claim {claim.claim}: check returned {type(res).__name__}")
-        _, cut_short = extent_note(runs, claim.whole_run, claim.done_events)
+        _, cut_short = extent_note(mine, claim.whole_run, claim.done_events)
         status = ("not_reproduced" if cut_short and res.status != "not_reproduced"
                   else res.status)
         out[claim.claim] = {"status": status, "clauses": [
