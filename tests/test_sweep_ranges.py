@@ -151,12 +151,14 @@ def test_each_thomas2024_scene_is_swept_in_its_own_experiments_only() -> None:
     case2 = {"case2_start_right_lateral", "case2_start_left_lateral", "case2_start_skew_deg",
              "case2_v_lean_deg", "case2_v_ahead"}
     case3 = {"case3_near_gap", "case3_duration_scale", "case3_aim_offset_deg"}
-    assert set(declared_ranges(c.Case1Config)) == case1 | {"proximity_noise"}
+    sensors = {"proximity_noise", "tof_fov_deg"}
+    estimator = {"normal_history", "normal_neighbours"}  # only model (5) uses it: case 2
+    assert set(declared_ranges(c.Case1Config)) == case1 | sensors
     assert declared_ranges(c.Case1NoProximityConfig) == declared_ranges(c.Case1Config)
-    assert set(declared_ranges(c.Case2Config)) == case2 | {"proximity_noise"}
+    assert set(declared_ranges(c.Case2Config)) == case2 | sensors | estimator
     assert declared_ranges(c.Case2CoarseConfig) == declared_ranges(c.Case2Config)
-    assert set(declared_ranges(c.Case3Config)) == case3 | {"proximity_noise"}
-    assert not declared_ranges(c.ParallelConfig)  # noise-free by design: not swept
+    assert set(declared_ranges(c.Case3Config)) == case3 | sensors
+    assert set(declared_ranges(c.ParallelConfig)) == {"tof_fov_deg"}  # noise-free by design
     # every default inside its range (the canonical scene is one plausible scene)
     for cls in (c.Case1Config, c.Case2Config, c.Case3Config):
         d = cls()

@@ -266,3 +266,25 @@ def test_case2_and_case3_fields_shape_their_scenes() -> None:
 
     with pytest.raises(ConfigError, match="after the next starts"):
         check_config(dataclasses.replace(C.Case3Config(), case3_duration_scale=1.5))
+
+
+def test_sensor_model_fields_reach_the_rings_and_the_estimator(tmp_path: Path) -> None:
+    """Issue 19: the ToF cone and the estimator's history / neighbours are config fields: the
+    defaults are the committed model (one ray, 15 steps, 1 neighbour), and a cone changes
+    the readings near a board seen at a slant."""
+    from experiments.thomas2024 import scene as sc
+    from repro.control.proximity_features import NormalEstimatorConfig
+
+    d = C.Case1Config()
+    assert (d.tof_fov_deg, d.normal_history, d.normal_neighbours) == (0.0, 15, 1)
+    default = NormalEstimatorConfig()
+    assert (default.history, default.neighbours) == (15, 1)
+    assert all(s.fov_deg == 0.0 for s in sc.ring_specs(1.0, 0.0))
+    assert all(s.fov_deg == 27.0 for s in sc.ring_specs(1.0, 0.0, 27.0))
+    ray = load_run(run(short_config("case1", proximity_noise=0.0), tmp_path / "ray")).trace
+    cone = load_run(run(short_config("case1", proximity_noise=0.0, tof_fov_deg=27.0),
+                        tmp_path / "cone")).trace
+    cols = [c for c in ray.columns if re.fullmatch(r"r\d_d\d+", c)]
+    first_ray, first_cone = ray[cols].to_numpy()[0], cone[cols].to_numpy()[0]  # same pose
+    assert cols and (first_cone <= first_ray + 1e-9).all()  # a cone's nearest return
+    assert (first_cone < first_ray - 0.05).any()  # sees the slanted board sooner

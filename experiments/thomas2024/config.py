@@ -192,6 +192,28 @@ class Thomas2024Config:
             "VL53L-class ToF ranging at 4-30 cm indoors: a standard deviation of a few mm; "
             "a decade around the default, from a well-calibrated sensor (0.5 mm) to the "
             "paper's 'accuracy of data reduces around minimum distance' (5 mm)")))  # ours: VL53L-class ToF, a few mm
+    tof_fov_deg: float = param(
+        0.0, unit="deg", range=(0.0, 90.0),
+        help="each ToF sensor's full field of view: 0 = one ray along its axis (the paper's "
+             "thin field), else a cone of rays returning the nearest hit",
+        sweep=SweepRange(0.0, 27.0, dist="discrete", values=(0.0, 27.0), reason=(
+            "Sec. II-A models 'a thin-field range finder in which detection occurs along the "
+            "axis of sensor'; the VL53L-class parts of such rings have a 25-27 deg cone "
+            "(data sheets): either")))  # ours: the paper's model
+    normal_history: int = param(
+        15, unit="steps", range=(1, 300),
+        help="control steps of past detections the normal estimator keeps (Sec. II-A1)",
+        sweep=SweepRange(5, 30, when=CASE2, reason=(
+            "Sec. II-A1 fits 'successive measurements ... in previous instances' without a "
+            "count: from 1/6 s to 1 s of the 30 Hz loop (used by model (5), case 2's ring "
+            "2)")))  # ours: 0.5 s at 30 Hz
+    normal_neighbours: int = param(
+        1, range=(1, 8),
+        help="adjacent sensors on each side whose past points the estimator uses",
+        sweep=SweepRange(1, 2, dist="discrete", values=(1.0, 2.0), when=CASE2, reason=(
+            "Sec. II-A1: 'successive measurements on adjacent sensors located on the same "
+            "ring': the nearest on each side, or the two nearest (20 or 40 deg of an "
+            "18-sensor ring)")))  # ours: the nearest
     max_range: float = param(1.0, unit="m", range=(0.05, 10.0),
                              help="reading with no detection (Sec. V: 1 m)")
     qp_solver: str = param("proxsuite", choices=QP_SOLVERS,

@@ -285,10 +285,11 @@ def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024C
         q0 = solve_ik(robot, "ring2", T_ring2_goal @ sc.trans(0, 0, -sc.PARALLEL_RETREAT), q_goal)
     robot.reset(q0)
     rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(config.seed).spawn(2)]
-    specs = sc.ring_specs(config.max_range, config.proximity_noise)
+    specs = sc.ring_specs(config.max_range, config.proximity_noise, config.tof_fov_deg)
     rings = [ProximityRing(s, r) for s, r in zip(specs, rngs, strict=True)]
-    estimators = [NormalEstimator(s.directions(), s.radius,
-                                  NormalEstimatorConfig(range_noise=s.noise_std)) for s in specs]
+    estimators = [NormalEstimator(s.directions(), s.radius, NormalEstimatorConfig(
+        history=config.normal_history, neighbours=config.normal_neighbours,
+        range_noise=s.noise_std)) for s in specs]
     sensors = [RingSensor(ring, robot, ring.spec.name, scene.physics.client, f"r{k + 1}_",
                           config.thresholds[k],
                           lambda T, r, est=est: est.update(T, r.delta, r.detected))

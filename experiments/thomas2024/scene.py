@@ -38,12 +38,14 @@ INTRINSICS = Intrinsics(width=640, height=480, fu=431.0, fv=429.5, u0=322.3, v0=
 N_SENSORS = 18  # thomas2024 Sec. V
 
 
-def ring_specs(max_range: float, noise: float) -> tuple[RingSpec, RingSpec]:
+def ring_specs(max_range: float, noise: float, fov_deg: float = 0.0
+               ) -> tuple[RingSpec, RingSpec]:
     """The two rings, sensor 1 along the ring frame's x axis, numbered counter-clockwise
-    about the ring axis (ours: the paper does not say how its sensors are numbered)."""
+    about the ring axis (ours: the paper does not say how its sensors are numbered); each
+    sensor one ray (``fov_deg`` = 0, Sec. II-A's thin field) or a cone of that full angle."""
     return (
-        RingSpec("ring1", RING1_RADIUS, N_SENSORS, max_range, 0.0, 0.0, noise),
-        RingSpec("ring2", RING2_RADIUS, N_SENSORS, max_range, 0.0, 0.0, noise),
+        RingSpec("ring1", RING1_RADIUS, N_SENSORS, max_range, 0.0, 0.0, noise, fov_deg=fov_deg),
+        RingSpec("ring2", RING2_RADIUS, N_SENSORS, max_range, 0.0, 0.0, noise, fov_deg=fov_deg),
     )
 
 
