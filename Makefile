@@ -43,10 +43,14 @@ test-slow: $(STAMP)  ## only the long runs marked slow
 	$(BIN)/pytest -q -m slow
 
 # The committed sweeps (issue 19): each reruns only the variants not yet judged.
-SWEEPS := pomares2011.exp3:64 pomares2011.exp3_no_tactile:64
+# experiment:variants[:camera] (camera exact unless render: the rendered subsamples)
+SWEEPS := pomares2011.exp3:64 pomares2011.exp3_no_tactile:64 pomares2011.exp1:50 \
+          thomas2024.case1:300 thomas2024.case2:100 thomas2024.case3:100 \
+          thomas2024.case1:10:render thomas2024.case2:10:render thomas2024.case3:10:render
 
 sweeps: $(STAMP)  ## the variant sweeps over the declared ranges -> results/sweeps/ (Dask, all cores)
-	@for s in $(SWEEPS); do $(BIN)/repro sweep $${s%%:*} --n $${s##*:} --seed 0 || exit 1; done
+	@for s in $(SWEEPS); do IFS=: read -r exp n cam <<< "$$s"; \
+	  $(BIN)/repro sweep "$$exp" --n "$$n" --seed 0 --camera "$${cam:-exact}" || exit 1; done
 	$(BIN)/repro figures
 	$(BIN)/repro report
 
