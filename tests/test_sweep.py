@@ -416,3 +416,19 @@ def test_a_per_run_claim_is_judged_on_the_swept_run_alone(tmp_path: Path) -> Non
     assert names["verdicts"]["3"]["clauses"][0]["name"] == "case: the error stays under 1"
     with pytest.raises(ConfigError, match="per_run names"):
         Claim("fake", "4", "x", "-", ("case",), _check_each, per_run=("other",))
+
+
+def test_a_verdict_the_same_everywhere_ranks_what_moves_its_margin(tmp_path: Path) -> None:
+    from repro.runs.sweep_sensitivity import write_sensitivity
+
+    x = np.linspace(0.0, 1.0, 9)
+    pd.DataFrame({"variant": range(9), "run_status": ["completed"] * 9, "p.a": x,
+                  "p.b": np.roll(x, 4), "claim1.status": ["reproduced"] * 9,
+                  "claim1.c1.measured": 2 * x, "claim1.c1.margin": 0.5 + 2 * x,
+                  "claim1.c1.holds": [True] * 9}).to_csv(tmp_path / "variants.csv",
+                                                         index=False)
+    sens = pd.read_csv(write_sensitivity(tmp_path, "case"), dtype={"claim": str})
+    clause = sens[sens["clause"] == "clause 1"].set_index("parameter")
+    assert clause.loc["a", "rank"] == 1 and clause.loc["a", "spearman"] == pytest.approx(1.0)
+    assert (clause["holds_when"] == "every variant holds").all()
+    assert abs(clause.loc["b", "spearman"]) < 1.0

@@ -382,13 +382,18 @@ def _deciders(path: Path, base: Path) -> list[str]:
     df = pd.read_csv(path, dtype={"claim": str, "clause": str}, keep_default_na=False)
     top = df[df["rank"].astype(int) == 1]
     if top.empty:
-        return ["Which unknown decides it: no verdict varies over these variants.", ""]
+        return []
     lines = [f"Which unknown decides it (best single split per verdict that varies, "
              f"{_link(path, base)}; deciding when its permutation p < {DECIDES_P:g}):", ""]
     for r in top.itertuples():
         what = f"claim {r.claim}" + (f", \"{r.clause}\"" if r.clause else "")
-        p = float(r.permutation_p)
         rho = f"{float(r.spearman):+.2f}" if r.spearman not in ("", "nan") else "-"
+        if str(r.holds_when).startswith("every variant"):
+            if r.clause and rho != "-":  # the claim's own 0/1 margin says nothing more
+                lines.append(f"- {what}: {r.holds_when}; its margin follows {r.parameter} "
+                             f"most (Spearman {rho})")
+            continue
+        p = float(r.permutation_p)
         if r.holds_when == "none" or p >= DECIDES_P:
             lines.append(f"- {what}: no swept parameter decides it alone (best: {r.parameter}, "
                          f"split accuracy {float(r.split_accuracy):.2f} vs "

@@ -12,8 +12,9 @@ the variants, and every swept parameter:
 - Spearman's rank correlation of the clause's signed margin with the parameter (for a
   claim, of its verdict), which a split misses when the verdict flips more than once.
 
-Parameters are ranked per claim / clause by gain, then by |rho|. A verdict the same in
-every variant has no row: no parameter in the ranges decides it.
+Parameters are ranked per claim / clause by gain, then by |rho|. A verdict the same in every
+variant gets rows too (``holds_when`` "every variant holds" / "fails", no split): ranked by
+|rho|, they say which parameter moves its margin towards the bound.
 """
 
 from __future__ import annotations
@@ -77,9 +78,21 @@ def _rows(experiment: str, claim: str, clause: str, params: pd.DataFrame, y: pd.
           score: pd.Series, rng: np.random.Generator) -> list[tuple[object, ...]]:
     ok = y.notna()
     yv = y[ok].astype(bool).to_numpy()
-    if yv.all() or not yv.any():
-        return []
     n = len(yv)
+    if n and (yv.all() or not yv.any()):  # one verdict everywhere: how the margin moves
+        same = "holds" if yv.all() else "fails"
+        rows = []
+        for p in params.columns:
+            x = pd.to_numeric(params.loc[ok, p], errors="coerce").to_numpy(dtype=float)
+            rho = _spearman(x, pd.to_numeric(score[ok], errors="coerce").to_numpy(dtype=float))
+            rows.append([experiment, claim, clause, p[2:], 0, math.nan,
+                         f"every variant {same}", 1.0, 1.0, 0.0, math.nan, rho, n])
+        rows.sort(key=lambda r: -(abs(float(r[11])) if np.isfinite(r[11]) else 0))
+        for k, r in enumerate(rows, start=1):
+            r[4] = k
+        return [tuple(r) for r in rows]
+    if not n:
+        return []
     majority = max(yv.sum(), n - yv.sum()) / n
     perms = [rng.permutation(yv) for _ in range(N_PERMUTATIONS)]
     out = []
