@@ -432,3 +432,19 @@ def test_a_verdict_the_same_everywhere_ranks_what_moves_its_margin(tmp_path: Pat
     assert clause.loc["a", "rank"] == 1 and clause.loc["a", "spearman"] == pytest.approx(1.0)
     assert (clause["holds_when"] == "every variant holds").all()
     assert abs(clause.loc["b", "spearman"]) < 1.0
+
+
+def test_the_report_flags_a_sweep_whose_ranges_changed(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    from repro.runs.report import _ranges_changed
+
+    monkeypatch.setattr(registry, "load_papers", lambda: _papers(Runner()))
+    d = tmp_path / "sweep"
+    d.mkdir()
+    pd.DataFrame({"variant": [0, 1], "p.gain": [0.2, 0.8]}).to_csv(d / "variants.csv",
+                                                                   index=False)
+    assert _ranges_changed(d, "fake.case") == []  # inside today's 0.1-0.9
+    pd.DataFrame({"variant": [0, 1], "p.gain": [0.05, 0.8], "p.old": [1, 2]}).to_csv(
+        d / "variants.csv", index=False)
+    text = " ".join(_ranges_changed(d, "fake.case"))
+    assert "no longer declared: old" in text and "gain swept over [0.05, 0.8]" in text

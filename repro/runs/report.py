@@ -363,6 +363,7 @@ def _robustness_section(results_dir: Path, paper: str, base: Path) -> list[str]:
                 f"{_link(rates, base)}).", "",
                 markdown_table(("claim", "clause", "variants", "held", "rate", "Wilson 95 %",
                                 "canonical run"), rows), ""]
+        out += _ranges_changed(rates.parent, str(meta["experiment"]))
         out += _deciders(rates.parent / "sensitivity.csv", base)
         out += _agreement(rates.parent / "render_agreement.csv", base)
     if not found:
@@ -405,6 +406,38 @@ def _deciders(path: Path, base: Path) -> list[str]:
                          f"{float(r.majority_accuracy):.2f} by the majority, p = {p:.3f}; "
                          f"Spearman {rho})")
     return lines + [""]
+
+
+def _ranges_changed(sweep_dir: Path, exp_id: str) -> list[str]:
+    """Issue 19: a sweep whose parameters are no longer the experiment's declared ranges (a
+    range added, dropped, narrowed or moved since it ran) says so: its rates are those of
+    the old ranges until it is rerun."""
+    from repro.runs.registry import find_experiment, load_papers
+    from repro.sweep_ranges import declared_ranges
+
+    try:
+        exp = find_experiment(load_papers(), exp_id)
+    except Exception:  # an experiment no longer registered: nothing to compare with
+        return []
+    ranges = declared_ranges(exp.config_cls)
+    df = pd.read_csv(sweep_dir / "variants.csv")
+    swept = {c[2:] for c in df.columns if c.startswith("p.")}
+    notes = []
+    if swept != set(ranges):
+        added, dropped = sorted(set(ranges) - swept), sorted(swept - set(ranges))
+        notes += [f"declared since: {', '.join(added)}"] if added else []
+        notes += [f"no longer declared: {', '.join(dropped)}"] if dropped else []
+    for name in sorted(swept & set(ranges)):
+        x = pd.to_numeric(df[f"p.{name}"], errors="coerce")
+        rng = ranges[name]
+        if x.min() < rng.low - 1e-12 or x.max() > rng.high + 1e-12:
+            notes.append(f"{name} swept over [{x.min():.4g}, {x.max():.4g}], now declared "
+                         f"[{rng.low:.4g}, {rng.high:.4g}]")
+    if not notes:
+        return []
+    return [f"**The declared ranges changed since this sweep ran** ({'; '.join(notes)}): its "
+            "rates are those of the ranges it sampled (its variants.csv) until it is rerun.",
+            ""]
 
 
 def _agreement(path: Path, base: Path) -> list[str]:
