@@ -158,7 +158,8 @@ def test_a_run_whose_controller_never_commands_is_not_completed(
 
 def test_lost_target_gives_zero_velocity_and_event(tmp_path: Path) -> None:
     # Start looking away from the target: every dot is out of the image.
-    cfg = short_config("case1", duration=0.3, q0_deg=(120.0, -60.0, 0.0, -90.0, 0.0, 100.0, 45.0))
+    # (case 3: no boards; in case 1 this start swings the arm through the right board)
+    cfg = short_config("case3", duration=0.3, q0_deg=(120.0, -60.0, 0.0, -90.0, 0.0, 100.0, 45.0))
     got = load_run(run(cfg, tmp_path / "lost"))
     assert (got.events["kind"] == "feature_lost").any()
     assert (got.trace["qp_status"] == "no_features").all()
@@ -288,3 +289,16 @@ def test_sensor_model_fields_reach_the_rings_and_the_estimator(tmp_path: Path) -
     first_ray, first_cone = ray[cols].to_numpy()[0], cone[cols].to_numpy()[0]  # same pose
     assert cols and (first_cone <= first_ray + 1e-9).all()  # a cone's nearest return
     assert (first_cone < first_ray - 0.05).any()  # sees the slanted board sooner
+
+
+def test_a_layout_through_the_start_pose_is_refused(tmp_path: Path) -> None:
+    """Issue 19: a swept layout whose board cuts through the arm at its start is not the
+    paper's scene (Fig. 4a: the robot starts free): refused before anything is written."""
+    from repro.errors import ConfigError
+
+    bad = dataclasses.replace(C.Case1Config(), camera_mode="exact", case1_turn_deg=-23.33,
+                              case1_right_lateral=0.2356, case1_right_back=0.4723,
+                              case1_right_top=0.6173)  # variant 12 of the first case-1 sweep
+    with pytest.raises(ConfigError, match="start configuration touches right"):
+        run(bad, tmp_path / "through")
+    assert not (tmp_path / "through").exists()

@@ -77,6 +77,42 @@ def check_config(config: Thomas2024Config) -> None:
     if np.any(q0 < lo) or np.any(q0 > hi):
         raise ConfigError(f"q0_deg {config.q0_deg} is outside the Panda's joint limits "
                           f"[{np.rad2deg(lo).round(1).tolist()}, {np.rad2deg(hi).round(1).tolist()}] deg")
+    touching = {n: d for n, d in start_distances(config).items() if d <= 0.0}
+    if touching:  # a swept layout through the start pose is not the paper's scene
+        raise ConfigError(
+            f"{config.case}: the start configuration touches "
+            + ", ".join(f"{n} ({d * 100:.1f} cm)" for n, d in sorted(touching.items()))
+            + ": the paper's robot starts free of the obstacles (Sec. V-A, Fig. 4a)")
+
+
+def _planes(config: Thomas2024Config, T_ring2_goal: np.ndarray) -> tuple[sc.Plane, ...]:
+    """The boards of ``config.case`` (none in case 3)."""
+    return {"parallel": lambda: sc.parallel_planes(T_ring2_goal, config.thresholds[1]),
+            "case1": lambda: sc.case1_planes(T_ring2_goal, case1_layout(config)),
+            "case2": lambda: sc.case2_planes(T_ring2_goal, config.thresholds[1],
+                                             case2_layout(config))
+            }.get(config.case, lambda: sc.SCENES[config.case].planes)()
+
+
+def start_distances(config: Thomas2024Config) -> dict[str, float]:
+    """Closest distance [m] of the robot at ``q0_deg`` to each board (PyBullet closest points
+    in a scene of its own: nothing written). Empty for the parallel-planes run, whose start
+    is solved from its goal."""
+    if config.case == "parallel":
+        return {}
+    scene = Scene(WorldConfig(physics_dt=1.0 / config.physics_rate,
+                              control_dt=1.0 / config.control_rate), render=False)
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            robot = scene.add_urdf("panda", sc.write_urdf(Path(tmp) / "panda.urdf"),
+                                   PANDA_JOINTS, PANDA_LIMITS)
+        T_ring2_goal = robot.frame_pose("ring2", np.deg2rad(sc.SCENES[config.case].q_goal_deg))
+        for pl in _planes(config, T_ring2_goal):
+            scene.add_box(pl.name, (*pl.size, pl.thickness), pl.T_world, BOARD_RGBA)
+        robot.reset(np.deg2rad(config.q0_deg))
+        return scene.distances(robot)
+    finally:
+        scene.close()
 
 
 @dataclass
@@ -264,12 +300,7 @@ def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024C
     q_goal = np.deg2rad(case.q_goal_deg)
     T_goal_cam = robot.frame_pose("camera_optical", q_goal)
     T_ring2_goal = robot.frame_pose("ring2", q_goal)
-    planes = {"parallel": lambda: sc.parallel_planes(T_ring2_goal, config.thresholds[1]),
-              "case1": lambda: sc.case1_planes(T_ring2_goal, case1_layout(config)),
-              "case2": lambda: sc.case2_planes(T_ring2_goal, config.thresholds[1],
-                                               case2_layout(config))
-              }.get(config.case, lambda: case.planes)()
-    for pl in planes:
+    for pl in _planes(config, T_ring2_goal):
         scene.add_box(pl.name, (*pl.size, pl.thickness), pl.T_world, BOARD_RGBA)
     movers = {}
     if case.hand is not None:
