@@ -448,3 +448,30 @@ def test_the_report_flags_a_sweep_whose_ranges_changed(tmp_path: Path,
         d / "variants.csv", index=False)
     text = " ".join(_ranges_changed(d, "fake.case"))
     assert "no longer declared: old" in text and "gain swept over [0.05, 0.8]" in text
+
+
+def _refuse_high_gain(config: GainCfg) -> None:
+    if config.gain > 0.7:
+        raise ConfigError(f"gain {config.gain:.2f}: no scene of the paper's")
+
+
+def test_a_variant_its_experiment_refuses_is_a_refused_row_not_a_judged_one(
+        tmp_path: Path) -> None:
+    runner = Runner()
+    base = _papers(runner)["fake"]
+    exp = Experiment(name="case", paper="fake", description="refuses", config_cls=GainCfg,
+                     run=runner, check=_refuse_high_gain)
+    papers = {"fake": Paper(key="fake", experiments=(exp, base.experiments[1]),
+                            claims=base.claims)}
+    path = run_sweep("fake.case", 16, seed=7, results_dir=tmp_path, papers=papers)
+    df = pd.read_csv(path)
+    gains = np.array([v["gain"] for v in sample_variants(GainCfg, 16, seed=7)])
+    refused = df["run_status"] == "refused"
+    assert list(refused) == list(gains > 0.7) and 0 < refused.sum() < 16
+    assert df.loc[refused, "run_reason"].str.contains("no scene of the paper's").all()
+    assert df.loc[refused, "claim1.status"].isna().all()
+    assert len(runner.calls) == int((~refused).sum())  # a refused variant never runs
+    rates = pd.read_csv(path.parent / "rates.csv", dtype={"claim": str})
+    claim = rates[rates["clause"].isna()].iloc[0]
+    assert claim["variants"] == int((~refused).sum()) and claim["refused"] == refused.sum()
+    assert claim["failed_runs"] == 0

@@ -36,7 +36,7 @@ def sweep_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
         meta = json.loads((csv.parent / "variants.columns.json").read_text(encoding="utf-8"))
         paper, exp = str(meta["experiment"]).split(".", 1)
         df = pd.read_csv(csv)
-        df = df[df["run_status"] != "failed"]
+        df = df[~df["run_status"].isin(("failed", "refused"))]
         params = [c for c in df.columns if c.startswith("p.")]
         names = _clause_names(csv.parent)
         claims = sorted({c.split(".", 1)[0][len("claim"):] for c in df.columns

@@ -357,9 +357,11 @@ def _robustness_section(results_dir: Path, paper: str, base: Path) -> list[str]:
                  f"[{float(r.wilson_low):.2f}, {float(r.wilson_high):.2f}]"
                  if r.wilson_low else "-", r.canonical or "-") for r in df.itertuples()]
         failed = df["failed_runs"].iloc[0] if len(df) else "0"
+        refused = (df["refused"].iloc[0] or "0") if len(df) and "refused" in df else "0"
         out += [f"**{meta['experiment']}**: {meta.get('n')} variants of the ranges above "
                 f"(Sobol, seed {meta.get('seed')}, {meta.get('camera')} camera, "
-                f"{meta.get('engine', 'serial')} engine; {failed} failed runs; "
+                f"{meta.get('engine', 'serial')} engine; {failed} failed runs; {refused} "
+                f"refused as no scene of the paper's{_refusals(rates.parent)}; "
                 f"{_link(rates, base)}).", "",
                 markdown_table(("claim", "clause", "variants", "held", "rate", "Wilson 95 %",
                                 "canonical run"), rows), ""]
@@ -406,6 +408,18 @@ def _deciders(path: Path, base: Path) -> list[str]:
                          f"{float(r.majority_accuracy):.2f} by the majority, p = {p:.3f}; "
                          f"Spearman {rho})")
     return lines + [""]
+
+
+def _refusals(sweep_dir: Path) -> str:
+    """Why the refused variants were refused: the distinct reasons, without their numbers."""
+    import re
+
+    df = pd.read_csv(sweep_dir / "variants.csv", dtype=str, keep_default_na=False)
+    why = df.loc[df["run_status"] == "refused", "run_reason"]
+    if why.empty:
+        return ""
+    kinds = sorted({re.sub(r"\(-?[0-9.]+ cm\)", "", w).split(": ", 2)[-1].strip() for w in why})
+    return " (" + "; ".join(kinds[:3]) + ")"
 
 
 def _ranges_changed(sweep_dir: Path, exp_id: str) -> list[str]:

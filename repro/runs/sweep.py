@@ -40,6 +40,11 @@ __all__ = ["SWEEPS_DIR", "VERDICTS_FILE", "run_sweep", "run_variant", "sweep_cla
            "variant_config"]
 
 VERDICTS_FILE = "verdicts.json"
+#: run_status of a variant its experiment refuses before running (ConfigError: e.g. a board
+#: through the robot's start pose); such a variant is no scene of the paper's, not a failure
+REFUSED = "refused"
+#: run statuses that are not judged variants
+NOT_JUDGED = ("failed", REFUSED)
 CAMERAS = ("exact", "render")
 ENGINES = ("serial", "dask")
 
@@ -86,8 +91,10 @@ def _claim_runs(claim: Claim, runs: Mapping[str, Any]) -> dict[str, Any]:
     return {n: runs[n] for n in claim.per_run if n in runs}
 
 
-def variant_config(exp: Experiment, overrides: Mapping[str, Any], camera: str | None) -> Any:
-    """The default config with ``overrides`` (and ``camera_mode=camera``), checked."""
+def variant_config(exp: Experiment, overrides: Mapping[str, Any], camera: str | None,
+                   check: bool = True) -> Any:
+    """The default config with ``overrides`` (and ``camera_mode=camera``), checked unless
+    ``check`` is False (the caller checks it, e.g. to record a refused variant)."""
     config = exp.config_cls()
     names = {f.name for f in dataclasses.fields(config)}
     unknown = sorted(set(overrides) - names)
@@ -100,7 +107,8 @@ def variant_config(exp: Experiment, overrides: Mapping[str, Any], camera: str | 
         if "camera_mode" in names:
             changes["camera_mode"] = camera
     config = dataclasses.replace(config, **changes)
-    registry.check_config(exp, config)
+    if check:
+        registry.check_config(exp, config)
     return config
 
 
@@ -169,8 +177,8 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
     exp, paper = _experiment(exp_id, papers)
     members = sweep_members(exp, paper)
     configs = {}
-    for m in members:
-        config = variant_config(m, overrides, camera)
+    for m in members:  # checked below: a variant the experiment refuses is a row
+        config = variant_config(m, overrides, camera, check=False)
         configs[m.name] = config if keep_traces else _outputs_off(config)
     chash = registry.compute_config_hash(configs[exp.name])
     run_dir = Path(sweep_dir) / "variants" / chash[:12]
@@ -185,12 +193,18 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
     status, reason, verdicts = "completed", "", {}
     try:
         for m in members:
+            registry.check_config(m, configs[m.name])
+    except ConfigError as exc:  # e.g. a layout through the start pose: not a plausible scene
+        status, reason = REFUSED, f"{m.name}: {exc}"
+    try:
+        for m in members if status == "completed" else ():
             registry.run_experiment(m, configs[m.name], dirs[m.name])
             manifest = json.loads((dirs[m.name] / "manifest.json").read_text(encoding="utf-8"))
             if manifest.get("status") != "completed" and status == "completed":
                 status = str(manifest.get("status"))
                 reason = (f"{m.name}: " if m is not exp else "") + str(manifest.get("reason", ""))
-        verdicts = _judge(sweep_claims(exp, paper), dirs)
+        if status != REFUSED:
+            verdicts = _judge(sweep_claims(exp, paper), dirs)
     except Exception as exc:  # a crashed variant is a row, not a lost sweep (^C still stops)
         status, reason, verdicts = "failed", f"{type(exc).__name__}: {exc}", {}
     row: dict[str, Any] = {"variant": index, "config_hash": chash[:12], "run_status": status,

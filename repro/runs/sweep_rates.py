@@ -4,7 +4,8 @@
 One row per claim (``clause`` empty: the claim reproduced) and per clause (the clause held):
 variants judged, how many held, the rate, its Wilson 95 % interval, and the canonical run's
 verdict from results/claims.csv and results/claim_clauses.csv. Failed runs are not judged
-variants; they are counted apart.
+variants; they are counted apart, and so are the refused ones (``refused``: the experiment
+rejected the variant's scene before running, e.g. a board through the robot's start pose).
 """
 
 from __future__ import annotations
@@ -22,7 +23,9 @@ __all__ = ["AGREEMENT_COLUMNS", "RATES_COLUMNS", "wilson_interval", "write_agree
            "write_rates"]
 
 RATES_COLUMNS = ("experiment", "claim", "clause", "variants", "held", "rate", "wilson_low",
-                 "wilson_high", "failed_runs", "canonical")
+                 "wilson_high", "failed_runs", "canonical", "refused")
+#: run statuses that are not judged variants (repro.runs.sweep.NOT_JUDGED)
+NOT_JUDGED = ("failed", "refused")
 Z95 = 1.959963984540054  # the two-sided 95 % normal quantile
 
 
@@ -74,8 +77,9 @@ def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str,
     judged gets a row ``claim = "1+2+3"``: the variants in which every one is reproduced."""
     sweep_dir, results_dir = Path(sweep_dir), Path(results_dir)
     df = pd.read_csv(sweep_dir / "variants.csv")
-    judged = df[df["run_status"] != "failed"]
+    judged = df[~df["run_status"].isin(NOT_JUDGED)]
     failed = int((df["run_status"] == "failed").sum())
+    refused = int((df["run_status"] == "refused").sum())
     names = _clause_names(sweep_dir)
     canon_claims, canon_clauses = _canonical(results_dir, paper)
     rows = []
@@ -86,7 +90,7 @@ def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str,
         k = int((st == "reproduced").sum())
         lo, hi = wilson_interval(k, len(st))
         rows.append((experiment, cid, "", len(st), k, k / len(st) if len(st) else math.nan,
-                     lo, hi, failed, canon_claims.get(cid, "")))
+                     lo, hi, failed, canon_claims.get(cid, ""), refused))
         j = 1
         while f"claim{cid}.c{j}.holds" in df.columns:
             col = judged[f"claim{cid}.c{j}.holds"].dropna()
@@ -95,7 +99,7 @@ def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str,
             lo, hi = wilson_interval(k, n)
             name = names.get((cid, j), f"clause {j}")
             rows.append((experiment, cid, name, n, k, k / n if n else math.nan, lo, hi, failed,
-                         canon_clauses.get((cid, name), "")))
+                         canon_clauses.get((cid, name), ""), refused))
             j += 1
     for group in joint:
         cols = [f"claim{c}.status" for c in group]
@@ -110,7 +114,7 @@ def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str,
         rows.append((experiment, "+".join(group), "(jointly: every claim reproduced)", n, k,
                      k / n if n else math.nan, lo, hi, failed,
                      "reproduced" if all(c == "reproduced" for c in canon)
-                     else ("" if not all(canon) else "not jointly")))
+                     else ("" if not all(canon) else "not jointly"), refused))
     out = sweep_dir / "rates.csv"
     pd.DataFrame(rows, columns=list(RATES_COLUMNS)).to_csv(out, index=False,
                                                            float_format="%.6g")
@@ -128,7 +132,7 @@ def write_agreement(exact_dir: Path, render_dir: Path, experiment: str) -> Path:
     ex = pd.read_csv(Path(exact_dir) / "variants.csv")
     re_ = pd.read_csv(Path(render_dir) / "variants.csv")
     params = sorted(c for c in ex.columns if c.startswith("p.") and c in re_.columns)
-    ex, re_ = (d[d["run_status"] != "failed"] for d in (ex, re_))
+    ex, re_ = (d[~d["run_status"].isin(NOT_JUDGED)] for d in (ex, re_))
     key = ex[params].round(12).astype(str).agg("|".join, axis=1)
     rkey = re_[params].round(12).astype(str).agg("|".join, axis=1)
     twins = ex.assign(_k=key).merge(re_.assign(_k=rkey), on="_k", suffixes=("", "@render"))

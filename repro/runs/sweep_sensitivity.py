@@ -117,7 +117,7 @@ def write_sensitivity(sweep_dir: Path, experiment: str) -> Path:
 
     sweep_dir = Path(sweep_dir)
     df = pd.read_csv(sweep_dir / "variants.csv")
-    df = df[df["run_status"] != "failed"].reset_index(drop=True)
+    df = df[~df["run_status"].isin(("failed", "refused"))].reset_index(drop=True)
     params = df[[c for c in df.columns if c.startswith("p.")]]
     names = _clause_names(sweep_dir)
     rng = np.random.default_rng(SEED)
