@@ -351,6 +351,5 @@ def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024C
 
 def run(config: Thomas2024Config, out_dir: Path, experiment: str | None = None) -> Path:
     """Run one thomas2024 case and write its run files (see repro.sim.episode)."""
-    check_config(config)
-    ep = build(config, Path(out_dir))[0]
+    ep = build(config, Path(out_dir))[0]  # build checks the config first (start clearance too)
     return run_episode(ep, Path(out_dir), paper="thomas2024", config=config, experiment=experiment)

@@ -18,6 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from repro.plots.style import apply_style, save_figure  # noqa: E402
+from repro.runs.sweep_rates import NOT_JUDGED  # noqa: E402
 
 __all__ = ["sweep_figures"]
 
@@ -36,7 +37,7 @@ def sweep_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
         meta = json.loads((csv.parent / "variants.columns.json").read_text(encoding="utf-8"))
         paper, exp = str(meta["experiment"]).split(".", 1)
         df = pd.read_csv(csv)
-        df = df[~df["run_status"].isin(("failed", "refused"))]
+        df = df[~df["run_status"].isin(NOT_JUDGED)]
         params = [c for c in df.columns if c.startswith("p.")]
         names = _clause_names(csv.parent)
         claims = sorted({c.split(".", 1)[0][len("claim"):] for c in df.columns

@@ -33,6 +33,7 @@ from repro.errors import ConfigError, ReproError
 from repro.runs import registry
 from repro.runs.claims import Claim, ClaimResult, extent_note
 from repro.runs.registry import Experiment, Paper
+from repro.runs.sweep_rates import REFUSED
 from repro.runs.trace import load_run
 from repro.sweep_ranges import declared_ranges, sample_variants
 
@@ -40,11 +41,6 @@ __all__ = ["SWEEPS_DIR", "VERDICTS_FILE", "run_sweep", "run_variant", "sweep_cla
            "variant_config"]
 
 VERDICTS_FILE = "verdicts.json"
-#: run_status of a variant its experiment refuses before running (ConfigError: e.g. a board
-#: through the robot's start pose); such a variant is no scene of the paper's, not a failure
-REFUSED = "refused"
-#: run statuses that are not judged variants
-NOT_JUDGED = ("failed", REFUSED)
 CAMERAS = ("exact", "render")
 ENGINES = ("serial", "dask")
 

@@ -24,8 +24,11 @@ __all__ = ["AGREEMENT_COLUMNS", "RATES_COLUMNS", "wilson_interval", "write_agree
 
 RATES_COLUMNS = ("experiment", "claim", "clause", "variants", "held", "rate", "wilson_low",
                  "wilson_high", "failed_runs", "canonical", "refused")
-#: run statuses that are not judged variants (repro.runs.sweep.NOT_JUDGED)
-NOT_JUDGED = ("failed", "refused")
+#: run_status of a variant its experiment refuses before running (ConfigError: e.g. a board
+#: through the robot's start pose); such a variant is no scene of the paper's, not a failure
+REFUSED = "refused"
+#: run statuses that are not judged variants (a crash, a refusal)
+NOT_JUDGED = ("failed", REFUSED)
 Z95 = 1.959963984540054  # the two-sided 95 % normal quantile
 
 

@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from repro.runs.sweep_rates import NOT_JUDGED
+
 __all__ = ["N_PERMUTATIONS", "SENSITIVITY_COLUMNS", "best_split", "write_sensitivity"]
 
 SENSITIVITY_COLUMNS = ("experiment", "claim", "clause", "parameter", "rank", "split_at",
@@ -117,7 +119,7 @@ def write_sensitivity(sweep_dir: Path, experiment: str) -> Path:
 
     sweep_dir = Path(sweep_dir)
     df = pd.read_csv(sweep_dir / "variants.csv")
-    df = df[~df["run_status"].isin(("failed", "refused"))].reset_index(drop=True)
+    df = df[~df["run_status"].isin(NOT_JUDGED)].reset_index(drop=True)
     params = df[[c for c in df.columns if c.startswith("p.")]]
     names = _clause_names(sweep_dir)
     rng = np.random.default_rng(SEED)
