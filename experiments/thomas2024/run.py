@@ -6,7 +6,6 @@ benchmarks; the loop itself is :func:`repro.sim.episode.run_episode`.
 
 from __future__ import annotations
 
-import dataclasses
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,6 +15,12 @@ import numpy as np
 from experiments.thomas2024 import scene as sc
 from experiments.thomas2024.columns import declare_columns
 from experiments.thomas2024.config import RING_MODELS, Thomas2024Config
+from experiments.thomas2024.layout import (
+    BOARD_RGBA,
+    case3_hand,
+    planes,
+    start_view,
+)
 from repro.config import validate
 from repro.control.cbf_qp import CBFQPController, Inequalities, cbf_inequalities, ibvs_objective
 from repro.control.proximity_features import (
@@ -38,7 +43,6 @@ from repro.vision.ibvs import feature_jacobian
 from repro.vision.pose import point_depths
 
 RING_NAMES = ("ring1", "ring2")
-BOARD_RGBA = (0.8, 0.7, 0.55, 1.0)  # ours: light wood
 HAND_RGBA = (0.9, 0.75, 0.65, 1.0)  # ours: skin
 
 
@@ -77,42 +81,21 @@ def check_config(config: Thomas2024Config) -> None:
     if np.any(q0 < lo) or np.any(q0 > hi):
         raise ConfigError(f"q0_deg {config.q0_deg} is outside the Panda's joint limits "
                           f"[{np.rad2deg(lo).round(1).tolist()}, {np.rad2deg(hi).round(1).tolist()}] deg")
-    touching = {n: d for n, d in start_distances(config).items() if d <= 0.0}
+    start = start_view(config)
+    if start is None:
+        return
+    touching = {n: d for n, d in start.distances.items() if d <= 0.0}
     if touching:  # a swept layout through the start pose is not the paper's scene
         raise ConfigError(
             f"{config.case}: the start configuration touches "
             + ", ".join(f"{n} ({d * 100:.1f} cm)" for n, d in sorted(touching.items()))
             + ": the paper's robot starts free of the obstacles (Sec. V-A, Fig. 4a)")
-
-
-def _planes(config: Thomas2024Config, T_ring2_goal: np.ndarray) -> tuple[sc.Plane, ...]:
-    """The boards of ``config.case`` (none in case 3)."""
-    return {"parallel": lambda: sc.parallel_planes(T_ring2_goal, config.thresholds[1]),
-            "case1": lambda: sc.case1_planes(T_ring2_goal, case1_layout(config)),
-            "case2": lambda: sc.case2_planes(T_ring2_goal, config.thresholds[1],
-                                             case2_layout(config))
-            }.get(config.case, lambda: sc.SCENES[config.case].planes)()
-
-
-def start_distances(config: Thomas2024Config) -> dict[str, float]:
-    """Closest distance [m] of the robot at ``q0_deg`` to each board (PyBullet closest points
-    in a scene of its own: nothing written). Empty for the parallel-planes run, whose start
-    is solved from its goal."""
-    if config.case == "parallel":
-        return {}
-    scene = Scene(WorldConfig(physics_dt=1.0 / config.physics_rate,
-                              control_dt=1.0 / config.control_rate), render=False)
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            robot = scene.add_urdf("panda", sc.write_urdf(Path(tmp) / "panda.urdf"),
-                                   PANDA_JOINTS, PANDA_LIMITS)
-        T_ring2_goal = robot.frame_pose("ring2", np.deg2rad(sc.SCENES[config.case].q_goal_deg))
-        for pl in _planes(config, T_ring2_goal):
-            scene.add_box(pl.name, (*pl.size, pl.thickness), pl.T_world, BOARD_RGBA)
-        robot.reset(np.deg2rad(config.q0_deg))
-        return scene.distances(robot)
-    finally:
-        scene.close()
+    if start.hidden.any():  # ours: the paper's camera, not the exact projection, decides
+        raise ConfigError(
+            f"{config.case}: the camera does not find target dot(s) "
+            f"{(np.flatnonzero(start.hidden) + 1).tolist()} at the start configuration "
+            "though they lie inside the image (rendered frame: a board hides them): the "
+            "paper's visual task uses all four points from t = 0 (Sec. V, Figs. 7b, 8b)")
 
 
 @dataclass
@@ -265,27 +248,6 @@ def estimated_rings(config: Thomas2024Config) -> tuple[int, ...]:
     return tuple(k + 1 for k, m in enumerate(config.ring_models) if m != "coarse")
 
 
-def case1_layout(config: Thomas2024Config) -> sc.Case1Layout:
-    """Case 1's board layout from the config's ``case1_*`` fields."""
-    return sc.Case1Layout(**{f: getattr(config, f"case1_{f}")
-                             for f in sc.Case1Layout.__dataclass_fields__})
-
-
-def case2_layout(config: Thomas2024Config) -> sc.Case2Layout:
-    """Case 2's board layout from the config's ``case2_*`` fields."""
-    return sc.Case2Layout(**{f: getattr(config, f"case2_{f}")
-                             for f in sc.Case2Layout.__dataclass_fields__})
-
-
-def case3_hand(config: Thomas2024Config, hand: sc.HandPath) -> sc.HandPath:
-    """Case 3's hand path with the config's ``case3_*`` fields: the nearest gap, every
-    approach's duration scaled, every direction turned (start times kept)."""
-    turn = np.deg2rad(config.case3_aim_offset_deg)
-    return dataclasses.replace(hand, near_gap=config.case3_near_gap, approaches=tuple(
-        (ring, t0, duration * config.case3_duration_scale, azimuth + turn)
-        for ring, t0, duration, azimuth in hand.approaches))
-
-
 def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024Controller]:
     """The scene, robot, sensors and controller of ``config.case``."""
     check_config(config)
@@ -300,7 +262,7 @@ def build(config: Thomas2024Config, out_dir: Path) -> tuple[Episode, Thomas2024C
     q_goal = np.deg2rad(case.q_goal_deg)
     T_goal_cam = robot.frame_pose("camera_optical", q_goal)
     T_ring2_goal = robot.frame_pose("ring2", q_goal)
-    for pl in _planes(config, T_ring2_goal):
+    for pl in planes(config, T_ring2_goal):
         scene.add_box(pl.name, (*pl.size, pl.thickness), pl.T_world, BOARD_RGBA)
     movers = {}
     if case.hand is not None:
