@@ -45,8 +45,9 @@ class SweepRange:
         values: the choices of a ``discrete`` range (each within ``[low, high]``).
         when: ``((field, value), ...)``: the range applies only to the configs whose
             defaults have these values (e.g. ``(("case", "case1"),)``: a scene's layout is
-            swept only in the experiments of that scene); empty = every config that has the
-            field.
+            swept only in the experiments of that scene); a ``frozenset`` value means one
+            of its members (e.g. ``(("experiment", frozenset({"exp3", "exp3_no_tactile"})),)``);
+            empty = every config that has the field.
     """
 
     low: float
@@ -58,7 +59,8 @@ class SweepRange:
 
     def applies(self, defaults: Any) -> bool:
         """Whether this range is swept in the config whose defaults are ``defaults``."""
-        return all(getattr(defaults, f, _MISSING) == v for f, v in self.when)
+        return all(getattr(defaults, f, _MISSING) in v if isinstance(v, frozenset)
+                   else getattr(defaults, f, _MISSING) == v for f, v in self.when)
 
     def __post_init__(self) -> None:
         if self.dist not in DISTRIBUTIONS:
@@ -103,7 +105,8 @@ class SweepRange:
 
     def describe(self) -> str:
         extra = f" {list(self.values)}" if self.dist == "discrete" else ""
-        only = "".join(f" (only where {f} = {v!r})" for f, v in self.when)
+        only = "".join(f" (only where {f} is one of {sorted(v)})" if isinstance(v, frozenset)
+                       else f" (only where {f} = {v!r})" for f, v in self.when)
         return f"{self.dist} [{self.low:g}, {self.high:g}]{extra}{only}: {self.reason}"
 
 

@@ -143,6 +143,34 @@ def test_a_range_can_apply_to_one_scene_only() -> None:
         SweepRange(0.0, 1.0, when=("case", "a"), reason="a malformed condition")  # type: ignore[arg-type]
 
 
+def test_a_range_can_apply_to_some_experiments() -> None:
+    """``when`` with a frozenset: one of its values (pomares2011's cylinder size is swept in
+    experiment 3 and its ablation, not in the whole task, whose layout is solved for one)."""
+    from experiments.pomares2011.exp3_config import Exp3Config, Exp3NoTactileConfig
+    from experiments.pomares2011.task import TaskConfig
+
+    @dataclass(frozen=True)
+    class Runs:
+        run: str = param("a", choices=("a", "b", "c"))
+        size: float = param(1.0, range=(0.0, 5.0), sweep=SweepRange(
+            0.5, 2.0, when=(("run", frozenset({"a", "b"})),), reason="runs a and b only"))
+
+    @dataclass(frozen=True)
+    class RunB(Runs):
+        run: str = param("b", choices=("a", "b", "c"))
+
+    @dataclass(frozen=True)
+    class RunC(Runs):
+        run: str = param("c", choices=("a", "b", "c"))
+
+    assert [list(declared_ranges(c)) for c in (Runs, RunB, RunC)] == [["size"], ["size"], []]
+    assert "(only where run is one of ['a', 'b'])" in declared_ranges(Runs)["size"].describe()
+    size = {"cylinder_radius", "cylinder_length", "palm_gap", "translation_m"}
+    assert size <= set(declared_ranges(Exp3Config))
+    assert size <= set(declared_ranges(Exp3NoTactileConfig))
+    assert not size & set(declared_ranges(TaskConfig))
+
+
 def test_each_thomas2024_scene_is_swept_in_its_own_experiments_only() -> None:
     from experiments.thomas2024 import config as c
 

@@ -44,6 +44,11 @@ BREAKAWAY_DETECT_RAD = math.radians(0.5)
 DROP_M = 5.0e-3
 
 
+#: The cylinder's size, the grasp height and the trajectory length are swept in experiment 3
+#: and its ablation only: the whole task's layout (IK, desired features) is solved for one.
+EXP3_ONLY = (("experiment", frozenset(EXPERIMENTS_EXP3)),)
+
+
 # ============================================================================ config
 @dataclass(frozen=True)
 class Exp3Config:
@@ -59,11 +64,14 @@ class Exp3Config:
     hold_s: float = param(2.0, unit="s", range=(0.0, 60.0), help="fingers held after the stop "
                           "(line 13) or the end of the trajectory, still logged")  # ours: does the object stay after the stop?
     # --- the cylinder and its contacts
-    cylinder_radius: float = param(0.040, unit="m", range=(0.02, 0.08), help="cylinder radius")  # ours: an 80 mm cylinder; its fingertip contacts then land on the distal pads' last row (x_pad 17 mm, plan)
-    cylinder_length: float = param(0.120, unit="m", range=(0.05, 0.30), help="cylinder length (along the hand's x)")  # ours: longer than the 69 mm span of fingers 1-2
+    cylinder_radius: float = param(0.040, unit="m", range=(0.02, 0.08), help="cylinder radius",
+        sweep=SweepRange(0.030, 0.050, when=EXP3_ONLY, reason="Sec. 7.3 and Fig. 11 name 'a cylinder' held by the three fingers, no size: a hand-sized one of 60-100 mm diameter (a drink can's 66 mm to a jar's 100 mm); the planner reaches every planned pose over this range with every swept grasp height and trajectory length"))  # ours: an 80 mm cylinder; its fingertip contacts then land on the distal pads' last row (x_pad 17 mm, plan)
+    cylinder_length: float = param(0.120, unit="m", range=(0.05, 0.30), help="cylinder length (along the hand's x)",
+        sweep=SweepRange(0.090, 0.200, when=EXP3_ONLY, reason="no length given: from 90 mm (the span of fingers 1-2, 69 mm, plus the 10 mm the config check asks, rounded up) to a 200 mm bottle"))  # ours: longer than the 69 mm span of fingers 1-2
     cylinder_mass: float = param(0.5, unit="kg", range=(0.01, 2.0), help="cylinder mass",
         sweep=SweepRange(0.1, 1.0, dist="log-uniform", reason="an 80 x 120 mm cylinder from thin-walled plastic (~0.1 kg) to solid dense polymer (1.2 g/cm^3: 0.72 kg), rounded up; under the BH8's 2 kg per finger"))  # ours: a solid 80 x 120 mm cylinder of density 0.83 g/cm^3 (hard wood, polymer); within the 2 kg per finger (facts sheet)
-    palm_gap: float = param(0.005, unit="m", range=(0.0, 0.05), help="gap between the palm and the cylinder at the start (the approach's end)")  # ours: the approach stops 5 mm short of the object
+    palm_gap: float = param(0.005, unit="m", range=(0.0, 0.05), help="gap between the palm and the cylinder at the start (the approach's end): the grasp height",
+        sweep=SweepRange(0.0, 0.015, when=EXP3_ONLY, reason="Sec. 6: the hand ends the approach 'situated over this object'; from touching the palm to 15 mm over it (three times our 5 mm; about the fingertip's 13 mm thickness)"))  # ours: the approach stops 5 mm short of the object
     friction: float = param(1.0, range=(0.05, 2.0), help="Coulomb friction coefficient of the cylinder against the hand and the support",
         sweep=SweepRange(0.5, 1.5, reason="dry rubber (the pads' skin) on wood or plastic: static coefficients of 0.5-1.5 in engineering tables; GraspIt's rubber table gives 1.0"))  # ours: rubber on wood / plastic, static 1.0 (kinetic 0.9) in GraspIt's material table (src/material.cpp, from the CRC Handbook); PyBullet has one coefficient. The pads' cover material is not given
     rolling_friction: float = param(1.0e-4, unit="m", range=(0.0, 0.01), help="PyBullet rolling friction of the cylinder (resisting torque / normal force)")  # ours: 0.1 mm, a small fraction of the ~2-3 mm contact width on a soft skin
@@ -80,7 +88,8 @@ class Exp3Config:
     support_speed_m_s: float = param(0.05, unit="m/s", range=(0.001, 1.0), help="lowering speed of the support")  # ours: the weight comes onto the fingers in ~0.2 s
     settle_s: float = param(1.0, unit="s", range=(0.0, 10.0), help="wait after the support is down before the trajectory starts")  # ours: the cylinder settles in the fingers within ~0.5 s (measured)
     # --- phase 2: the planned trajectory
-    translation_m: float = param(0.020, unit="m", range=(0.0005, 0.04), help="planned translation of the cylinder towards fingers 1-2 (hand -y), perpendicular to the fingers")  # ours: half the cylinder's radius; the direction in which finger 3's contact moves towards its pad's edge, the paper's situation at the stop (Sec. 7.3)
+    translation_m: float = param(0.020, unit="m", range=(0.0005, 0.04), help="planned translation of the cylinder towards fingers 1-2 (hand -y), perpendicular to the fingers: the trajectory length",
+        sweep=SweepRange(0.010, 0.030, when=EXP3_ONLY, reason="Sec. 7.3 gives no length ('translate the cylinder in the perpendicular direction of the fingers', stopped early): a quarter to three quarters of our 40 mm radius; n_steps stays 80, so a step is 0.125-0.375 mm, under MAX_STEP_M"))  # ours: half the cylinder's radius; the direction in which finger 3's contact moves towards its pad's edge, the paper's situation at the stop (Sec. 7.3)
     n_steps: int = param(80, range=(1, 2000), help="trajectory steps after the initial grasp (step 0)")  # ours: 0.25 mm of translation per step
     readjust_threshold_kpa: tuple[float, float, float] = param(
         PAPER_READJUST_THRESHOLD_KPA, unit="kPa", range=(0.7, 140.0),
