@@ -165,6 +165,12 @@ def test_the_cli_sweeps_and_reports(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     assert (tmp_path / "sweeps" / "case" / "variants.csv").is_file()
     assert cli.main(["sweep", "fake.case", "--n", "0", "--results", str(tmp_path),
                      "--serial"]) == 2
+    # more than 1024 variants parse (a sweep that refuses most starts needs them); 2**16 + 1
+    # and more workers than 1024 do not
+    args = cli.build_parser().parse_args(["sweep", "fake.case", "--n", "1100"])
+    assert args.n == 1100
+    for bad in (["--n", "65537"], ["--n", "4", "-j", "1025"]):
+        assert cli.main(["sweep", "fake.case", *bad, "--results", str(tmp_path)]) == 2
 
 
 # ----------------------------------------------------------------- paired sweeps

@@ -80,6 +80,10 @@ def test_samples_are_reproducible_inside_the_ranges_and_spread() -> None:
     assert {v["steps"] for v in a} == {5, 10, 20} and all(isinstance(v["steps"], int)
                                                           for v in a)
     assert len(sample_variants(Cfg, 5, seed=0)) == 5
+    # a larger sweep extends a smaller one: its first variants are the smaller one's, so a
+    # resumed sweep with a larger n keeps every finished variant
+    assert sample_variants(Cfg, 2000, seed=3)[:16] == a
+    assert sample_variants(Cfg, 1100, seed=0)[:1024] == sample_variants(Cfg, 1024, seed=0)
     with pytest.raises(ConfigError, match="at least one"):
         sample_variants(Cfg, 0, seed=0)
 
