@@ -626,22 +626,28 @@ def source_paths() -> list[Path]:
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from repro.runs.sweep import run_sweep
+    from repro.runs.sweep_rates import REFUSED
 
     check_dir_arg(args.results, "--results")
-    failures = 0
+    counts: dict[str, int] = {}
     with tqdm(total=args.n, desc="variants", unit="variant", file=sys.stderr,
               disable=not sys.stderr.isatty()) as bar:
         def done(row: dict[str, Any]) -> None:
-            nonlocal failures
-            failures += row.get("run_status") != "completed"
-            bar.set_postfix_str(f"failures {failures}")
+            status = str(row.get("run_status"))
+            counts[status] = counts.get(status, 0) + 1
+            bar.set_postfix_str(f"failed {counts.get('failed', 0)}, "
+                                f"refused {counts.get(REFUSED, 0)}")
             bar.update(1)
 
         path = run_sweep(args.experiment, args.n, args.seed, args.results, args.camera,
                          args.keep_traces, on_done=done,
                          engine="serial" if args.serial else "dask",
                          scheduler=args.scheduler, workers=args.workers)
-    print(f"wrote {path} ({args.n} variants, {failures} failed runs)")
+    # a refused start (check_config said no) is not a failed run: count them apart
+    failed, refused = counts.get("failed", 0), counts.get(REFUSED, 0)
+    judged = sum(counts.values()) - failed - refused
+    print(f"wrote {path} ({args.n} variants: {judged} judged, {refused} refused starts, "
+          f"{failed} failed runs)")
     return 0
 
 

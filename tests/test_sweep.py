@@ -161,7 +161,7 @@ def test_the_cli_sweeps_and_reports(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     monkeypatch.setattr(registry, "load_papers", lambda: _papers(runner))
     code = cli.main(["sweep", "fake.case", "--n", "3", "--results", str(tmp_path), "--serial"])
     out: Any = capsys.readouterr().out
-    assert code == 0 and "3 variants, 0 failed runs" in out
+    assert code == 0 and "3 variants: 3 judged, 0 refused starts, 0 failed runs" in out
     assert (tmp_path / "sweeps" / "case" / "variants.csv").is_file()
     assert cli.main(["sweep", "fake.case", "--n", "0", "--results", str(tmp_path),
                      "--serial"]) == 2
