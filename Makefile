@@ -44,9 +44,13 @@ test-slow: $(STAMP)  ## only the long runs marked slow
 
 # The committed sweeps (issue 19): each reruns only the variants not yet judged.
 # experiment:variants[:camera] (camera exact unless render: the rendered subsamples)
-SWEEPS := pomares2011.exp3:64 pomares2011.exp3_no_tactile:64 pomares2011.exp1:50 \
-          thomas2024.case1:300 thomas2024.case2:100 thomas2024.case3:100 \
-          thomas2024.case1:10:render thomas2024.case2:10:render thomas2024.case3:10:render
+SWEEPS := pomares2011.exp3:100 pomares2011.exp3_no_tactile:100 \
+          pomares2011.exp1:50 pomares2011.exp1:10:render \
+          pomares2011.exp2:30 pomares2011.exp2:10:render \
+          thomas2024.case1:360 thomas2024.case2:1100 thomas2024.case3:100 \
+          thomas2024.case1:16:render thomas2024.case2:106:render thomas2024.case3:10:render
+# (case 1 and case 2 refuse 16 % and 91 % of their starts: 360 and 1100 variants judge >= 300
+# and >= 100; their rendered subsamples are the first variants with >= 10 judged)
 
 sweeps: $(STAMP)  ## the variant sweeps over the declared ranges -> results/sweeps/ (Dask, all cores)
 	@for s in $(SWEEPS); do IFS=: read -r exp n cam <<< "$$s"; \
