@@ -7,6 +7,7 @@ moves a reference::
     .venv/bin/python tests/measure_tolerances.py               # every reference
     .venv/bin/python tests/measure_tolerances.py --only pomares2011/exp1 --keep /tmp/sens
     .venv/bin/python tests/measure_tolerances.py --only committed   # make test-slow's reruns
+    .venv/bin/python tests/measure_tolerances.py --only chan2011/experiment --merge  # add a machine
 
 Each perturbation is a child process that reruns the references and writes their traces at
 full precision:
@@ -117,6 +118,10 @@ def main() -> None:
                          "for the committed runs make test-slow reruns)")
     ap.add_argument("--keep", type=Path, help="keep the perturbed traces here (resumable)")
     ap.add_argument("--margin", type=float, default=compare.DEFAULT_MARGIN)
+    ap.add_argument("--merge", action="store_true",
+                    help="keep what the tolerance file already holds (measured on another "
+                         "machine): write the looser of the two rules per column "
+                         "(repro.runs.compare.merge_tolerances)")
     ap.add_argument("--child")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
@@ -134,6 +139,8 @@ def main() -> None:
         for rid in args.only:
             ref = ALL[rid]
             tol = measure(ref, dirs, args.margin)
+            if args.merge and ref.tol_json.is_file():
+                tol = compare.merge_tolerances(json.loads(ref.tol_json.read_text()), tol)
             ref.tol_json.parent.mkdir(parents=True, exist_ok=True)
             ref.tol_json.write_text(json.dumps(tol, indent=1, sort_keys=False) + "\n")
             print(compare.summary(rid, tol))

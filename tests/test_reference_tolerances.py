@@ -27,6 +27,7 @@ from repro.runs.compare import (
     DEFAULT_MARGIN,
     compare_to_reference,
     measure_tolerances,
+    merge_tolerances,
 )
 
 N = 100
@@ -106,6 +107,41 @@ def test_reruns_of_another_length_widen_the_length_check_by_the_margin() -> None
     tol = measure_tolerances(ref, {"short": ref.iloc[:-2].reset_index(drop=True)})
     assert tol["rows_compared"] == N - 2 and tol["length_atol"] == DEFAULT_MARGIN * 2
     assert compare_to_reference(ref.iloc[:-5], ref, tol) == []
+
+
+def test_a_tolerance_measured_on_two_machines_holds_both_and_no_more() -> None:
+    """Machine A moves q by 1e-9 and leaves the flag alone; machine B (other kernels) moves
+    q by 4e-9, shifts qd's chatter (chaotic from a row on) and flips one label late. The
+    merged file passes every rerun of both, keeps each rule margin x its measured deviation,
+    and still fails what neither machine did."""
+    ref = _trace()
+    late = np.where(T < 0.5, "a", "b")
+    late[-1] = "a"
+    a_runs = {"a": _trace(q=np.sin(T) + 1e-9)}
+    b_runs = {"b": _trace(q=np.sin(T) - 4e-9, qd=np.roll(ref["qd"].to_numpy(), 1),
+                          phase=late)}
+    a = {**measure_tolerances(ref, a_runs), "measured_on": {"cpu": "A"}}
+    b = {**measure_tolerances(ref, b_runs), "measured_on": {"cpu": "B"}}
+    assert compare_to_reference(b_runs["b"], ref, a)  # A's file alone fails B's rerun
+    m = merge_tolerances(a, b)
+    for run in (*a_runs.values(), *b_runs.values()):
+        assert compare_to_reference(run, ref, m) == []
+    assert m["measured_on"] == [{"cpu": "A"}, {"cpu": "B"}]
+    assert set(m["perturbations"]) == {"a", "b"}
+    q = m["columns"]["q"]
+    assert q["measured"] == pytest.approx(4e-9, rel=1e-6) and q["by"] == "b"
+    assert q["atol"] == pytest.approx(DEFAULT_MARGIN * 4e-9, rel=1e-9)
+    assert m["columns"]["qd"]["stable"] == b["columns"]["qd"]["stable"] < N
+    assert m["columns"]["phase"]["kind"] == "text"  # exact on A, text on B
+    for r in m["columns"].values():
+        for w in r.get("windows", []):
+            assert all(w["atol"][k] == DEFAULT_MARGIN * w["measured"][k] for k in w["atol"])
+    assert merge_tolerances(b, a)["columns"]["q"] == q  # order does not matter
+    for change in ({"q": np.sin(T) + 1e-7}, {"q": np.sin(1.01 * T)},
+                   {"qd": 2e-3 * np.sign(np.sin(400 * T))}):
+        assert compare_to_reference(_trace(**change), ref, m)
+    with pytest.raises(ValueError, match="other references"):
+        merge_tolerances(a, measure_tolerances(ref.iloc[:-1], {"x": ref.iloc[:-1]}))
 
 
 def test_a_reference_column_of_zeros_equals_a_live_float_column() -> None:

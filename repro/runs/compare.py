@@ -39,7 +39,7 @@ import pandas as pd
 
 __all__ = ["CHAOTIC_FRACTION", "DEFAULT_MARGIN", "N_WINDOWS", "ROUNDING_RTOL",
            "TOLERANCE_FORMAT", "Violation", "compare_to_reference", "machine_description",
-           "measure_tolerances", "summary"]
+           "measure_tolerances", "merge_tolerances", "summary"]
 
 TOLERANCE_FORMAT = 1
 #: Tolerance = margin x the largest deviation measured over the perturbations. ours: the
@@ -248,6 +248,94 @@ def measure_tolerances(ref: pd.DataFrame, runs: Mapping[str, pd.DataFrame], *,
         "length_atol": margin * dlen,
         "columns": columns,
     }
+
+
+def _merge_float(a: Mapping[str, Any], b: Mapping[str, Any], margin: float) -> dict[str, Any]:
+    base, other = (a, b) if int(a["stable"]) <= int(b["stable"]) else (b, a)
+    out: dict[str, Any] = {k: v for k, v in base.items() if k != "windows"}
+    stable = int(base["stable"])
+    if stable > 0:
+        m = max(float(base["measured"]), float(other["measured"]))
+        if float(other["measured"]) > float(base["measured"]):
+            out.update(measured_row=other["measured_row"], by=other["by"])
+        out.update(measured=m, atol=margin * m)
+    o_stable = int(other["stable"])
+    o_point = float(other.get("measured", 0.0)) if o_stable > 0 else 0.0
+    windows = []
+    for w in base.get("windows", []):
+        lo, hi = w["rows"]
+        meas = dict(w["measured"])
+        for ow in other.get("windows", []):  # the other machine's overlapping windows
+            if ow["rows"][0] < hi and ow["rows"][1] > lo:
+                for st in meas:
+                    meas[st] = max(meas[st], float(ow["measured"].get(st, 0.0)))
+        if lo < o_stable:  # the other compared some of these rows pointwise: a window's
+            for st in ("mean", "rms"):  # mean and RMS move at most by that deviation
+                if st in meas:
+                    meas[st] = max(meas[st], o_point)
+        windows.append({"rows": [lo, hi], "measured": meas,
+                        "atol": {st: margin * v for st, v in meas.items()}})
+    if windows:
+        out["windows"] = windows
+    return out
+
+
+def _merge_text(a: Mapping[str, Any], b: Mapping[str, Any], margin: float) -> dict[str, Any]:
+    base, other = (a, b) if int(a["stable"]) <= int(b["stable"]) else (b, a)
+    out: dict[str, Any] = {k: v for k, v in base.items() if k != "windows"}
+    windows = []
+    for w in base.get("windows", []):
+        lo, hi = w["rows"]
+        meas = dict(w["measured"])
+        for ow in other.get("windows", []):  # (rows the other held equal moved by 0)
+            if ow["rows"][0] < hi and ow["rows"][1] > lo:
+                for st in set(meas) | set(ow["measured"]):
+                    meas[st] = max(meas.get(st, 0.0), float(ow["measured"].get(st, 0.0)))
+        windows.append({"rows": [lo, hi], "measured": meas,
+                        "atol": {st: margin * v for st, v in meas.items()}})
+    if windows:
+        out["windows"] = windows
+    return out
+
+
+def merge_tolerances(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, Any]:
+    """The tolerance file of one reference measured on two machines (``a`` and ``b``, each
+    from :func:`measure_tolerances`): per column the looser rule. A column exact on one
+    machine takes the other's rule; a float or text column's stable stretch is the shorter
+    of the two, its pointwise deviation the larger, and each window's statistics the larger
+    of its own and those of the other machine's overlapping windows (or, where the other
+    compared those rows pointwise, its pointwise deviation, which bounds a window's mean and
+    RMS change). Every tolerance stays ``margin`` x its measured deviation.
+
+    Raises:
+        ValueError: the two files describe other references (columns, rows or margin).
+    """
+    if (list(a["columns"]) != list(b["columns"]) or a["rows"] != b["rows"]
+            or a["margin"] != b["margin"]):
+        raise ValueError("the two tolerance files describe other references (columns, rows "
+                         "or margin differ): remeasure one")
+    margin = float(a["margin"])
+    columns: dict[str, Any] = {}
+    for c, ra in a["columns"].items():
+        rb = b["columns"][c]
+        if ra["kind"] == "exact" or rb["kind"] == "exact":
+            columns[c] = dict(rb if ra["kind"] == "exact" else ra)
+        elif ra["kind"] != rb["kind"]:
+            raise ValueError(f"column {c!r} is {ra['kind']} in one file, {rb['kind']} in the "
+                             "other")
+        else:
+            columns[c] = (_merge_float if ra["kind"] == "float" else _merge_text)(ra, rb,
+                                                                                  margin)
+    machines = [*(a["measured_on"] if isinstance(a["measured_on"], list)
+                  else [a["measured_on"]]),
+                *(b["measured_on"] if isinstance(b["measured_on"], list)
+                  else [b["measured_on"]])]
+    return {**a, "measured_on": machines,
+            "perturbations": sorted(set(a["perturbations"]) | set(b["perturbations"])),
+            "rows_compared": min(int(a["rows_compared"]), int(b["rows_compared"])),
+            "rows_measured": {**b["rows_measured"], **a["rows_measured"]},
+            "length_atol": max(float(a["length_atol"]), float(b["length_atol"])),
+            "columns": columns}
 
 
 # --------------------------------------------------------------------------- comparing
