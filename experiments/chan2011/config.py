@@ -17,6 +17,54 @@ SIMULATION = (("setting", "simulation"),)
 ESTIMATE_WHY = ("Sec. III-A prints one estimate (3.0 cm and 14.1 deg off at the conrod's "
                 "centroid); around it, from an exact estimate (0) to about the experiment's "
                 "user estimate (Sec. V-A3: 7.3 cm and 46 deg off, 2.4x and 3.3x): 0-3x")
+# --- the experiment's layout (issue 19): swept in the experiment setting only; the
+# simulation setting refuses any other value (run.check_config). Reasons written before any
+# sweep of them was run.
+EXPERIMENT = (("setting", "experiment"),)
+OBSTACLE_NAMES = ("textbook1", "textbook2", "binder", "pliers")  # chan2011 Tables II-III
+CONROD_XY_WHY = ("Sec. V-A3: 'manual measurements confirm that the (x, y, z) location of the "
+                 "conrod ... is closer to (0.130, 0.460, 0.170) m': a hand measurement of a "
+                 "part's centre with a ruler, +-2 cm in x and y (its height follows from the "
+                 "rest rule)")
+CONROD_YAW_WHY = ("Sec. V-A3: its rotation about z 'is actually closer to 135 deg' (than the "
+                  "user's 90): a by-eye angle, +-10 deg (under half the 22.5 deg beyond which "
+                  "it would be closer to 90 or 180 deg)")
+CONROD_TILT_WHY = ("Sec. V-A3: 'one side of the conrod rests on top of another object', "
+                   "giving an out-of-plane rotation about the base's y axis, no angle: one end "
+                   "lifted by a Table II object's height (pliers 20 mm, books 25 mm, binder "
+                   "40 mm) over the ~0.15 m between the part's ends, atan(0.020/0.15) = 7.6 deg "
+                   "to atan(0.040/0.15) = 15 deg; the low end widened to 5 deg (the part's own "
+                   "24-30 mm bosses partly level it on a flat object). Declared before any "
+                   "sweep; a draft's 20 deg top was cut to 15 after a reach check (no run, no "
+                   "verdict): from 16 deg the goal is beyond the arm's reach")
+OBSTACLE_XY_WHY = ("Table III prints the obstacles' centroids to 5 mm with no method; the "
+                   "test-bed's other poses were measured by hand (Sec. V-A1, V-A3): each "
+                   "centroid +-1 cm in x and y (twice the printed step); z kept (the books "
+                   "and the pliers lie on each other and on the binder)")
+OBSTACLE_YAW_WHY = ("Table III prints the obstacles' yaws to 5 deg (60, 95, 0, 60): a hand "
+                    "measurement's +-5 deg (one printed step) about each centroid")
+START_HEIGHT_WHY = ("Fig. 10: 'the initial image', an overhead view; our rule takes the highest "
+                    "view (2.5 cm grid) with every point 40 px inside the image, 0.425 m above "
+                    "the points' mean: from 0.35 m (6 cm above the camera's 0.29 m from the "
+                    "points at the goal, so that Sec. V-B's 'translational motion ... towards "
+                    "the target' remains) to one grid step above the rule's, 0.45 m (the check "
+                    "refuses a start with a point outside)")
+START_YAW_WHY = ("Sec. V-B: the task needs 'significant rotation ... about the camera's optical "
+                 "axis'; our rule's yaw (345 deg, 5 deg grid) gives the largest reachable at "
+                 "its height, 61 deg (turned further, the view is out of the arm's reach from "
+                 "the goal's branch): from it to 30 deg less in-plane rotation (375 deg, 31 "
+                 "deg: still 'significant'; the check refuses a start out of reach or view). The "
+                 "reachable yaws at 0.425 m (345-370 deg) were looked up (no run, no verdict) "
+                 "before the low end was fixed")
+POINTS_SPREAD_WHY = ("the paper gives no dot coordinates (Figs. 2 and 10 show ten dots on the "
+                     "part's faces): each face's dots spread about its centre from 0.8x ours "
+                     "(the small end's nearest two dots still two diameters, 16 mm, apart) to "
+                     "1.1x (its outer dots, 12.8 mm from its centre, 4 mm in radius, stay 0.9 "
+                     "mm inside its 19 mm face)")
+POINTS_JITTER_WHY = ("dots stuck on by hand (Figs. 2 and 10): each moved on its face by up to "
+                     "2 mm (a quarter of an 8 mm dot) in a random direction seeded by "
+                     "points_seed; the check refuses a dot off its face or over another dot")
+POINTS_SEED_WHY = "which random directions of the dots' jitter: any seed (0-65535)"
 
 
 @dataclass(frozen=True)
@@ -74,6 +122,70 @@ class Chan2011Config:
         help="the estimated object pose's rotation error (its angle, about the same axis) as a "
              "multiple of the setting's (Sec. III-A: 14.1 deg)",
         sweep=SweepRange(0.0, 3.0, when=SIMULATION, reason=ESTIMATE_WHY))  # the paper's: 1
+    # --- the experiment's layout (issue 19; used only when setting == "experiment";
+    # experiments/chan2011/layout.py derives the rest height, the goal's standoff and the start)
+    conrod_dx: float = param(
+        0.0, unit="m", range=(-0.1, 0.1),
+        help="conrod centroid's x offset from Sec. V-A3's 0.130 m (base frame)",
+        sweep=SweepRange(-0.02, 0.02, when=EXPERIMENT, reason=CONROD_XY_WHY))  # chan2011 Sec. V-A3
+    conrod_dy: float = param(
+        0.0, unit="m", range=(-0.1, 0.1),
+        help="conrod centroid's y offset from Sec. V-A3's 0.460 m (base frame)",
+        sweep=SweepRange(-0.02, 0.02, when=EXPERIMENT, reason=CONROD_XY_WHY))  # chan2011 Sec. V-A3
+    conrod_yaw_deg: float = param(
+        135.0, unit="deg", range=(0.0, 360.0),
+        help="conrod's rotation about the vertical (Sec. V-A3: 'closer to 135 deg')",
+        sweep=SweepRange(125.0, 145.0, when=EXPERIMENT, reason=CONROD_YAW_WHY))  # chan2011 Sec. V-A3
+    conrod_tilt_deg: float = param(
+        12.0, unit="deg", range=(0.0, 45.0),
+        help="conrod's out-of-plane rotation about the base's y axis (big end up)",
+        sweep=SweepRange(5.0, 15.0, when=EXPERIMENT, reason=CONROD_TILT_WHY))  # ours: no angle given
+    textbook1_dx: float = param(0.0, unit="m", range=(-0.1, 0.1), help="x offset from Table III",
+                                sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
+    textbook1_dy: float = param(0.0, unit="m", range=(-0.1, 0.1), help="y offset from Table III",
+                                sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
+    textbook1_dyaw_deg: float = param(0.0, unit="deg", range=(-45.0, 45.0),
+                                      help="yaw offset from Table III", sweep=SweepRange(
+                                          -5.0, 5.0, when=EXPERIMENT, reason=OBSTACLE_YAW_WHY))
+    textbook2_dx: float = param(0.0, unit="m", range=(-0.1, 0.1), help="x offset from Table III",
+                                sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
+    textbook2_dy: float = param(0.0, unit="m", range=(-0.1, 0.1), help="y offset from Table III",
+                                sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
+    textbook2_dyaw_deg: float = param(0.0, unit="deg", range=(-45.0, 45.0),
+                                      help="yaw offset from Table III", sweep=SweepRange(
+                                          -5.0, 5.0, when=EXPERIMENT, reason=OBSTACLE_YAW_WHY))
+    binder_dx: float = param(0.0, unit="m", range=(-0.1, 0.1), help="x offset from Table III",
+                             sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
+    binder_dy: float = param(0.0, unit="m", range=(-0.1, 0.1), help="y offset from Table III",
+                             sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
+    binder_dyaw_deg: float = param(0.0, unit="deg", range=(-45.0, 45.0),
+                                   help="yaw offset from Table III", sweep=SweepRange(
+                                       -5.0, 5.0, when=EXPERIMENT, reason=OBSTACLE_YAW_WHY))
+    pliers_dx: float = param(0.0, unit="m", range=(-0.1, 0.1), help="x offset from Table III",
+                             sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
+    pliers_dy: float = param(0.0, unit="m", range=(-0.1, 0.1), help="y offset from Table III",
+                             sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
+    pliers_dyaw_deg: float = param(0.0, unit="deg", range=(-45.0, 45.0),
+                                   help="yaw offset from Table III", sweep=SweepRange(
+                                       -5.0, 5.0, when=EXPERIMENT, reason=OBSTACLE_YAW_WHY))
+    start_height: float = param(
+        0.425, unit="m", range=(0.2, 1.0),
+        help="overhead start: the camera this far above the ten points' mean, looking down",
+        sweep=SweepRange(0.35, 0.45, when=EXPERIMENT, reason=START_HEIGHT_WHY))  # ours: Fig. 10, rule at scene.SETTINGS
+    start_yaw_deg: float = param(
+        345.0, unit="deg", range=(-360.0, 720.0),
+        help="overhead start: the camera's x axis turned this far from the base's x axis",
+        sweep=SweepRange(345.0, 375.0, when=EXPERIMENT, reason=START_YAW_WHY))  # ours: rule at scene.SETTINGS
+    points_spread: float = param(
+        1.0, range=(0.1, 2.0),
+        help="the dots' distances from their face's centre times this (1: scene.CONROD_POINTS)",
+        sweep=SweepRange(0.8, 1.1, when=EXPERIMENT, reason=POINTS_SPREAD_WHY))  # ours: no coordinates given
+    points_jitter: float = param(
+        0.0, unit="m", range=(0.0, 0.01),
+        help="each dot moved on its face by up to this, in a direction drawn from points_seed",
+        sweep=SweepRange(0.0, 0.002, when=EXPERIMENT, reason=POINTS_JITTER_WHY))  # ours
+    points_seed: int = param(0, range=SEED_RANGE, help="seed of the dots' jitter (32-bit)",
+                             sweep=SweepRange(0, 65535, when=EXPERIMENT, reason=POINTS_SEED_WHY))  # ours
     seed: int = param(0, range=SEED_RANGE, help="seed (no random element yet; 32-bit)")
     video: bool = param(False, help="also write an animated GIF of the run (video.gif)",
                         output_only=True)

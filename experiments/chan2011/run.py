@@ -15,10 +15,17 @@ import pinocchio as pin
 from experiments.chan2011 import scene as sc
 from experiments.chan2011.columns import declare_columns
 from experiments.chan2011.config import Chan2011Config
+from experiments.chan2011.layout import (
+    conrod_parts,
+    goal_configuration,
+    non_default_layout,
+    same_branch,
+    setting_for,
+)
 from repro.config import validate
 from repro.control.nmpc import NMPCConfig, NMPCSolution, VisualNMPC
 from repro.errors import ConfigError, ReproError
-from repro.geometry import inv_T, trans
+from repro.geometry import inv_T
 from repro.planning.dcc import (
     CollisionModel,
     certify_segment,
@@ -37,60 +44,39 @@ from repro.sim.crs_a465 import (
 )
 from repro.sim.drives import PositionReferenceDrive
 from repro.sim.episode import CameraRig, Episode, Observation, StepResult, View, run_episode
-from repro.sim.robot import Robot, solve_ik
-from repro.sim.scene import Part, Scene
+from repro.sim.robot import Robot
+from repro.sim.scene import Scene
 from repro.sim.world import WorldConfig
 from repro.vision.features import interaction_matrix_points, twist_transform
 from repro.vision.ibvs import feature_jacobian, ibvs_joint_velocity
+
+__all__ = ["Chan2011Controller", "build", "check_config", "conrod_parts", "run",
+           "same_branch", "scaled_estimate"]
 
 N = sc.N_POINTS
 Q_MIN, Q_MAX = np.asarray(CRS_LIMITS.q_min), np.asarray(CRS_LIMITS.q_max)
 
 
 def check_config(config: Chan2011Config) -> None:
-    """Reject a malformed config before anything runs."""
+    """Reject a malformed config, or a layout the paper's scene could not be, before anything
+    runs. The experiment's layout (experiments/chan2011/layout.py) is refused when its conrod
+    rests on nothing or inside an obstacle, a dot leaves its face, or the start has a point
+    less than 40 px inside the image, collides, or is off the goal's IK branch (geometric
+    checks only, cached per layout)."""
     validate(config)
     steps = config.dt * config.physics_rate
     if abs(steps - round(steps)) > 1e-6:
         raise ConfigError(f"dt = {config.dt} s is not a whole number of physics steps at "
                           f"{config.physics_rate} Hz")
+    if config.setting != "experiment" and non_default_layout(config):
+        raise ConfigError(f"{', '.join(non_default_layout(config))}: the experiment's layout "
+                          f"applies only to setting='experiment', not {config.setting!r}")
     if config.dcc and not sc.SETTINGS[config.setting].obstacles:
         raise ConfigError(f"dcc=True needs obstacles; setting {config.setting!r} has none")
+    setting_for(config)  # the experiment's layout: derived and checked (ConfigError)
 
 
-def same_branch(q_a: np.ndarray, q_b: np.ndarray) -> bool:
-    """Whether two CRS-A465 configurations lie on one inverse-kinematics branch: the elbow
-    (q3) and the wrist (q5) bent the same way and no joint more than 180 deg apart (the
-    shoulder flip q1 + 180 deg, q2 -> -q2 reaches the same point from the other side)."""
-    return bool(np.sign(q_a[2]) == np.sign(q_b[2]) and np.sign(q_a[4]) == np.sign(q_b[4])
-                and np.all(np.abs(q_a - q_b) < np.pi))
-
-
-def _goal_configuration(robot: Robot, setting: sc.Setting) -> np.ndarray:
-    """An IK solution for the goal flange pose (deterministic): seeded at the start when
-    ``setting.goal_from_start`` (and then on the start's branch), else the first of seeded
-    random starts."""
-    T_goal = sc.goal_flange_pose(setting)
-    if setting.goal_from_start:
-        q0 = np.deg2rad(setting.q0_deg)
-        q = solve_ik(robot, "flange", T_goal, q0, 300)
-        if not same_branch(q, q0):
-            raise ReproError(f"the goal's IK solution {np.rad2deg(q).round(1).tolist()} deg "
-                             f"is on another branch than the start {setting.q0_deg}")
-        return q
-    rng = np.random.default_rng(0)
-    for _ in range(200):
-        try:
-            return solve_ik(robot, "flange", T_goal, rng.uniform(0.9 * Q_MIN, 0.9 * Q_MAX), 300)
-        except ReproError:
-            continue
-    raise ReproError(f"no IK solution for the goal flange pose {T_goal[:3, 3]}")
-
-
-def conrod_parts() -> list[Part]:
-    """The conrod's primitives (sc.CONROD_PARTS: cylinders (radius, height), boxes (full
-    size), centred at the given point of the object frame)."""
-    return [Part(shape, tuple(size), trans(*centre)) for shape, size, centre in sc.CONROD_PARTS]
+_goal_configuration = goal_configuration  # the name tests/test_chan2011.py imports
 
 
 
@@ -117,7 +103,8 @@ class Chan2011Controller:
         intr = sc.CONTROLLER_INTRINSICS
         x, xd = intr.to_normalized(p_k.reshape(N, 2)), intr.to_normalized(self.p_d.reshape(N, 2))
         T_wc = self.robot.frame_pose("flange", q) @ T_FLANGE_CAMERA
-        Z = (sc.CONROD.points_world(self.setting.T_object_estimate) - T_wc[:3, 3]) @ T_wc[:3, 2]
+        Z = (self.setting.target.points_world(self.setting.T_object_estimate)
+             - T_wc[:3, 3]) @ T_wc[:3, 2]
         Z = np.where(Z > 0.02, Z, 0.02)  # ours: depths floored at 2 cm (a point behind the model camera)
         J_s = feature_jacobian(interaction_matrix_points(x, Z),
                                twist_transform(inv_T(T_FLANGE_CAMERA)),
@@ -131,7 +118,8 @@ class Chan2011Controller:
               ) -> tuple[np.ndarray, bool]:
         """(qdot, solved): the NMPC command, or zeros when no solve succeeded."""
         assert self.nmpc is not None
-        s, P = self.setting, sc.CONROD_POINTS
+        s = self.setting
+        P = s.target.points_target
         d_k = self.nmpc.disturbance(p_k, q, s.T_object_estimate, P)  # eq. (11)
         sol = self.nmpc.solve(q, self.p_d, d_k, s.T_object_estimate, P)
         lo = hi = None
@@ -236,7 +224,7 @@ def scaled_estimate(setting: sc.Setting, translation_scale: float, rotation_scal
 def build(config: Chan2011Config, out_dir: Path) -> Episode:
     """The scene, robot, camera, reference image and controller of ``config.setting``."""
     check_config(config)
-    setting = scaled_estimate(sc.SETTINGS[config.setting], config.estimate_translation_scale,
+    setting = scaled_estimate(setting_for(config), config.estimate_translation_scale,
                               config.estimate_rotation_scale)
     scene = Scene(WorldConfig(physics_dt=1.0 / config.physics_rate, control_dt=config.dt,
                               solver_iterations=50), render=config.camera_mode == "render",
@@ -246,7 +234,7 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
         scene.add_box(box.name, box.size, box.T_world, sc.OBSTACLE_RGBA)
     scene.add_compound("conrod", conrod_parts(), setting.T_object_actual, sc.CONROD_RGBA,
                        obstacle=False)
-    scene.add_dot_target("conrod_dots", sc.CONROD, setting.T_object_actual)
+    scene.add_dot_target("conrod_dots", setting.target, setting.T_object_actual)
     scene.check_colors(check_scene_colors)
     scene.add_mount("camera", "crs_a465", "flange", T_FLANGE_CAMERA @ sc.T_MOUNT_ERROR,
                     "true camera optical frame (x right, y down, z forward); the controller "
@@ -254,13 +242,13 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
     rig = CameraRig("camera", "p", Camera(sc.TRUE_INTRINSICS, mode=config.camera_mode), robot,
                     "flange", T_FLANGE_CAMERA @ sc.T_MOUNT_ERROR, "conrod_dots",
                     log_view_angle=True)
-    q_goal = _goal_configuration(robot, setting)
+    q_goal = goal_configuration(robot, setting)
     # The reference image: what the real camera sees at the goal (Fig. 2 / Fig. 3 'x').
     T_goal_cam = rig.pose(q_goal)
-    uv_d, found_d, _ = rig.camera.measure(scene.render_client, T_goal_cam, sc.CONROD,
+    uv_d, found_d, _ = rig.camera.measure(scene.render_client, T_goal_cam, setting.target,
                                           setting.T_object_actual)
     uv_true, _ = project_points(sc.TRUE_INTRINSICS, T_goal_cam,
-                                sc.CONROD.points_world(setting.T_object_actual))
+                                setting.target.points_world(setting.T_object_actual))
     if not np.all(found_d) or np.max(np.linalg.norm(uv_d - uv_true, axis=1)) > rig.tol_px:
         raise ReproError("the reference image does not show every feature point where its "
                          f"model projects: found {found_d.tolist()}, errors "

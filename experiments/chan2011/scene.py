@@ -68,6 +68,9 @@ CONROD_POINTS = np.array(_BIG + [
     (-0.160, -0.008, 0.024 + _PROUD),
 ])  # ours
 N_POINTS = 10  # chan2011 Sec. III-A: ten non-coplanar feature points
+#: the part (index into CONROD_PARTS) whose top face carries each dot: four on the big end,
+#: three on the beam, three on the small end (layout.conrod_points spreads them on it)
+CONROD_POINT_PARTS = (0, 0, 0, 0, 2, 2, 2, 1, 1, 1)
 
 
 def _hue_colors(n: int) -> tuple[tuple[int, int, int], ...]:
@@ -114,9 +117,13 @@ class Setting:
     #: seeded at q0; run.py checks the branch); False: the first of seeded random starts
     #: (the simulation's goal, found so before issue 17, lies on another branch than its start)
     goal_from_start: bool = False
+    #: the ten dots on the conrod (the experiment's layout may move them: layout.py)
+    target: DotTarget = CONROD
 
 
-def _pose(x: float, y: float, z: float, yaw_deg: float) -> np.ndarray:
+def table_pose(x: float, y: float, z: float, yaw_deg: float) -> np.ndarray:
+    """``T(x, y, z) Rz(yaw_deg)``: at (x, y, z) [m], turned by ``yaw_deg`` [deg] about the
+    vertical (Table III's reading, see the module docstring)."""
     return trans(x, y, z) @ Rz(yaw_deg * DEG)
 
 
@@ -138,16 +145,22 @@ def at_centroid(T_base_centroid: np.ndarray) -> np.ndarray:
 
 # chan2011 Tables II (L x W x H) and III (pose of the centroid).
 # ours: "Rz(a) T(x, y, z)" read as the centroid at (x, y, z) turned by a (see the docstring)
-OBSTACLES = (
-    Box("textbook1", (0.255, 0.175, 0.025), _pose(-0.030, 0.570, 0.185, 60.0)),
-    Box("textbook2", (0.235, 0.190, 0.025), _pose(-0.025, 0.450, 0.160, 95.0)),
-    Box("binder", (0.290, 0.270, 0.040), _pose(-0.040, 0.440, 0.120, 0.0)),
-    Box("pliers", (0.165, 0.075, 0.020), _pose(0.110, 0.440, 0.150, 60.0)),
-)
+TABLE_II = {  # chan2011 Table II: length, width, height [m]
+    "textbook1": (0.255, 0.175, 0.025), "textbook2": (0.235, 0.190, 0.025),
+    "binder": (0.290, 0.270, 0.040), "pliers": (0.165, 0.075, 0.020),
+}
+TABLE_III = {  # chan2011 Table III: centroid x, y, z [m], yaw [deg] (Rz(yaw) T(x, y, z))
+    "textbook1": (-0.030, 0.570, 0.185, 60.0), "textbook2": (-0.025, 0.450, 0.160, 95.0),
+    "binder": (-0.040, 0.440, 0.120, 0.0), "pliers": (0.110, 0.440, 0.150, 60.0),
+}
+# Issue 19: the defaults of the config's <obstacle>_dx/_dy/_dyaw_deg (layout.obstacles)
+OBSTACLES = tuple(Box(name, TABLE_II[name], table_pose(*TABLE_III[name])) for name in TABLE_II)
 
 #: The experiment's start (derived by tests/test_chan2011.py from the rule at SETTINGS):
 #: the camera 0.425 m above the mean of the ten points, looking straight down, turned 345 deg
-#: about the vertical (OVERHEAD_START), on the goal's IK branch.
+#: about the vertical (OVERHEAD_START), on the goal's IK branch. Issue 19: the defaults of the
+#: config's start_height / start_yaw_deg; layout.overhead_start derives a variant's start by
+#: the same IK rule (rounded to 0.01 deg) and keeps EXPERIMENT_Q0_DEG for this pose.
 OVERHEAD_START = (0.425, 345.0)  # (height [m], yaw [deg])
 EXPERIMENT_Q0_DEG = (70.15, -11.23, -55.21, 0.29, -102.04, 175.16)
 
@@ -163,10 +176,14 @@ EXPERIMENT_Q0_DEG = (70.15, -11.23, -55.21, 0.29, -102.04, 175.16)
 # penetrating: z = 0.1789 m (0.1 mm grid, rounded up), within a hand measurement's ~1 cm
 # of the paper's 0.170 m
 # (tests/test_chan2011.py checks the contact).
+# Issue 19: these are the defaults of the config's conrod_* fields; layout.py derives the rest
+# height of any variant by the same rule (layout.conrod_rest_z) and gives 0.1789 here.
+CONROD_MEASURED = (0.130, 0.460, 0.170)  # chan2011 Sec. V-A3 [m]
+CONROD_YAW_DEG = 135.0  # chan2011 Sec. V-A3: "closer to 135 deg"
 CONROD_TILT_DEG = 12.0
 CONROD_REST_Z = 0.1789
-T_CONROD_EXPERIMENT = at_centroid(trans(0.130, 0.460, CONROD_REST_Z) @ Ry(CONROD_TILT_DEG * DEG)
-                                  @ Rz(135 * DEG))
+T_CONROD_EXPERIMENT = at_centroid(trans(CONROD_MEASURED[0], CONROD_MEASURED[1], CONROD_REST_Z)
+                                  @ Ry(CONROD_TILT_DEG * DEG) @ Rz(CONROD_YAW_DEG * DEG))
 
 SETTINGS = {
     # chan2011 Sec. III-A: actual and estimated target poses (printed as T(.)Rz(.)Rx(.)).
@@ -184,14 +201,14 @@ SETTINGS = {
     # chan2011 Sec. V (issue 17: rebuilt from the paper's description; REPORT.md).
     "experiment": Setting(
         T_object_actual=T_CONROD_EXPERIMENT,
-        T_object_estimate=at_centroid(_pose(0.100, 0.400, 0.150, 90.0)),  # ours: read like Table III
+        T_object_estimate=at_centroid(table_pose(0.100, 0.400, 0.150, 90.0)),  # ours: read like Table III
         obstacles=OBSTACLES,
         # Fig. 2 / Sec. V-A: the reference image shows the gripper "in the correct position for
         # grasping", and Sec. V-B: the NMPC must "properly align the gripper with the conrod".
         # ours: the gripper axis along the tilted face normal through the beam centre, the
         # fingers across the beam, as close as the camera still sees all ten points 40 px
         # inside the image (the closest such standoff, 1 cm grid: 0.38 m; the opposite roll
-        # needs 0.40 m)
+        # needs 0.40 m; layout.goal_standoff applies the rule to a config's layout)
         standoff=0.38,
         approach=None,
         approach_yaw=0 * DEG,
