@@ -315,6 +315,16 @@ def test_rates_count_the_variants_with_their_interval(tmp_path: Path) -> None:
     assert clause["held"] == k and clause["canonical"] == "holds"
 
 
+def test_an_infinite_margin_is_drawn_at_the_edge_not_lost() -> None:
+    from repro.plots.sweeps import _clip_infinite
+
+    y, inf = _clip_infinite(np.array([0.0, 1.0, np.inf, -np.inf, np.nan]))
+    assert inf.tolist() == [False, False, True, True, False]
+    assert y[2] == pytest.approx(1.1) and y[3] == pytest.approx(-0.1) and np.isnan(y[4])
+    y, _ = _clip_infinite(np.array([np.inf]))  # no finite value: still on the axes
+    assert np.isfinite(y).all()
+
+
 def test_sweep_figures_and_the_report_section_come_from_the_files(tmp_path: Path) -> None:
     from repro.plots.sweeps import sweep_figures
     from repro.runs.report import _robustness_section

@@ -15,6 +15,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from repro.plots.style import apply_style, save_figure  # noqa: E402
@@ -27,6 +28,19 @@ def _clause_names(sweep_dir: Path) -> dict[tuple[str, int], str]:
     from repro.runs.sweep_rates import _clause_names as names
 
     return names(sweep_dir)
+
+
+def _clip_infinite(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(values with +-inf moved 10 % of the finite span beyond the finite extremes, the mask
+    of the infinite ones): a margin of inf (a clause met by a drop) is drawn, not lost."""
+    inf = np.isinf(y)
+    fin = y[np.isfinite(y)]
+    lo, hi = (float(fin.min()), float(fin.max())) if fin.size else (-1.0, 1.0)
+    pad = 0.1 * (hi - lo) if hi > lo else 1.0
+    out = y.copy()
+    out[inf & (y > 0)] = hi + pad
+    out[inf & (y < 0)] = lo - pad
+    return out, inf
 
 
 def sweep_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
@@ -51,12 +65,16 @@ def sweep_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
             for r, k in enumerate(ks):
                 margin = pd.to_numeric(df[f"claim{cid}.c{k}.margin"], errors="coerce")
                 held = df[f"claim{cid}.c{k}.holds"].astype(str).str.lower().eq("true")
+                y, infinite = _clip_infinite(margin.to_numpy(float))
                 for c, p in enumerate(params):
                     ax = axes[r][c]
-                    x = pd.to_numeric(df[p], errors="coerce")
-                    ax.scatter(x[held], margin[held], s=8, color="C0")
-                    ax.scatter(x[~held], margin[~held], s=8, facecolors="none",
-                               edgecolors="C3")
+                    x = pd.to_numeric(df[p], errors="coerce").to_numpy(float)
+                    for sel, marker in ((~infinite, "o"), (infinite, "^")):
+                        h, f = sel & held.to_numpy(), sel & ~held.to_numpy()
+                        ax.scatter(x[h], y[h], s=8 if marker == "o" else 14, marker=marker,
+                                   color="C0")
+                        ax.scatter(x[f], y[f], s=8 if marker == "o" else 14, marker=marker,
+                                   facecolors="none", edgecolors="C3")
                     ax.axhline(0.0, color="0.5", lw=0.6, ls=":")
                     if r == len(ks) - 1:
                         ax.set_xlabel(p[2:], fontsize=7)
@@ -65,9 +83,13 @@ def sweep_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
                     ax.tick_params(labelsize=6)
                 axes[r][0].set_title(names.get((cid, k), f"clause {k}")[:70], fontsize=6,
                                      loc="left")
+            fig.subplots_adjust(hspace=0.75)  # each row's clause title clear of the ticks above
             n = len(df)
-            fig.suptitle(f"{paper} {exp}: claim {cid} over {n} variants (filled: the clause "
-                         "holds; hollow: it fails)", fontsize=8)
+            fig.suptitle(f"{paper} {exp}: claim {cid} over {n} judged variants (filled: the "
+                         "clause holds; hollow: it fails)\ntriangles: an infinite margin (e.g. "
+                         "a drop) drawn at the edge; a variant without the clause's figure is "
+                         "not drawn", fontsize=8,
+                         y=1.0 + 0.3 / fig.get_size_inches()[1])  # above the clause titles
             written += save_figure(fig, Path(figures_dir), paper, f"sweep_{exp}_claim{cid}")
             plt.close(fig)
     return written
