@@ -300,7 +300,7 @@ def test_experiment_start_is_the_overhead_rule_on_the_goals_branch() -> None:
     from OVERHEAD_START, every point in view; no higher view (2.5 cm grid) is reachable on
     the goal's branch; at that height its yaw gives the largest rotation about the optical
     axis; the goal is the IK solution nearest the home pose and on the start's branch."""
-    from experiments.chan2011.run import Q_MAX, Q_MIN, _goal_configuration, same_branch
+    from experiments.chan2011.layout import Q_MAX, Q_MIN, goal_configuration, same_branch
     from repro.errors import ReproError
     from repro.geometry import inv_T
     from repro.sim.robot import Robot, solve_ik
@@ -311,7 +311,7 @@ def test_experiment_start_is_the_overhead_rule_on_the_goals_branch() -> None:
     with World() as w:
         robot = Robot(w, crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
         q0 = np.deg2rad(st.q0_deg)
-        q_goal = _goal_configuration(robot, st)
+        q_goal = goal_configuration(robot, st)
         assert same_branch(q0, q_goal)
         rng = np.random.default_rng(0)
         sols: list[np.ndarray] = []

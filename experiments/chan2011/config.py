@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from repro.config import param
 from repro.sweep_ranges import SweepRange
@@ -65,6 +66,16 @@ POINTS_JITTER_WHY = ("dots stuck on by hand (Figs. 2 and 10): each moved on its 
                      "2 mm (a quarter of an 8 mm dot) in a random direction seeded by "
                      "points_seed; the check refuses a dot off its face or over another dot")
 POINTS_SEED_WHY = "which random directions of the dots' jitter: any seed (0-65535)"
+
+
+def _table_iii_offset(axis: str) -> Any:
+    """One Table III obstacle's offset field (issue 19): ``axis`` "x" or "y" [m], +-1 cm
+    swept, or "yaw" [deg], +-5 deg swept (OBSTACLE_XY_WHY, OBSTACLE_YAW_WHY); default 0."""
+    if axis == "yaw":
+        return param(0.0, unit="deg", range=(-45.0, 45.0), help="yaw offset from Table III",
+                     sweep=SweepRange(-5.0, 5.0, when=EXPERIMENT, reason=OBSTACLE_YAW_WHY))
+    return param(0.0, unit="m", range=(-0.1, 0.1), help=f"{axis} offset from Table III",
+                 sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
 
 
 @dataclass(frozen=True)
@@ -140,34 +151,18 @@ class Chan2011Config:
         12.0, unit="deg", range=(0.0, 45.0),
         help="conrod's out-of-plane rotation about the base's y axis (big end up)",
         sweep=SweepRange(5.0, 15.0, when=EXPERIMENT, reason=CONROD_TILT_WHY))  # ours: no angle given
-    textbook1_dx: float = param(0.0, unit="m", range=(-0.1, 0.1), help="x offset from Table III",
-                                sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
-    textbook1_dy: float = param(0.0, unit="m", range=(-0.1, 0.1), help="y offset from Table III",
-                                sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
-    textbook1_dyaw_deg: float = param(0.0, unit="deg", range=(-45.0, 45.0),
-                                      help="yaw offset from Table III", sweep=SweepRange(
-                                          -5.0, 5.0, when=EXPERIMENT, reason=OBSTACLE_YAW_WHY))
-    textbook2_dx: float = param(0.0, unit="m", range=(-0.1, 0.1), help="x offset from Table III",
-                                sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
-    textbook2_dy: float = param(0.0, unit="m", range=(-0.1, 0.1), help="y offset from Table III",
-                                sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
-    textbook2_dyaw_deg: float = param(0.0, unit="deg", range=(-45.0, 45.0),
-                                      help="yaw offset from Table III", sweep=SweepRange(
-                                          -5.0, 5.0, when=EXPERIMENT, reason=OBSTACLE_YAW_WHY))
-    binder_dx: float = param(0.0, unit="m", range=(-0.1, 0.1), help="x offset from Table III",
-                             sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
-    binder_dy: float = param(0.0, unit="m", range=(-0.1, 0.1), help="y offset from Table III",
-                             sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
-    binder_dyaw_deg: float = param(0.0, unit="deg", range=(-45.0, 45.0),
-                                   help="yaw offset from Table III", sweep=SweepRange(
-                                       -5.0, 5.0, when=EXPERIMENT, reason=OBSTACLE_YAW_WHY))
-    pliers_dx: float = param(0.0, unit="m", range=(-0.1, 0.1), help="x offset from Table III",
-                             sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
-    pliers_dy: float = param(0.0, unit="m", range=(-0.1, 0.1), help="y offset from Table III",
-                             sweep=SweepRange(-0.01, 0.01, when=EXPERIMENT, reason=OBSTACLE_XY_WHY))
-    pliers_dyaw_deg: float = param(0.0, unit="deg", range=(-45.0, 45.0),
-                                   help="yaw offset from Table III", sweep=SweepRange(
-                                       -5.0, 5.0, when=EXPERIMENT, reason=OBSTACLE_YAW_WHY))
+    textbook1_dx: float = _table_iii_offset("x")
+    textbook1_dy: float = _table_iii_offset("y")
+    textbook1_dyaw_deg: float = _table_iii_offset("yaw")
+    textbook2_dx: float = _table_iii_offset("x")
+    textbook2_dy: float = _table_iii_offset("y")
+    textbook2_dyaw_deg: float = _table_iii_offset("yaw")
+    binder_dx: float = _table_iii_offset("x")
+    binder_dy: float = _table_iii_offset("y")
+    binder_dyaw_deg: float = _table_iii_offset("yaw")
+    pliers_dx: float = _table_iii_offset("x")
+    pliers_dy: float = _table_iii_offset("y")
+    pliers_dyaw_deg: float = _table_iii_offset("yaw")
     start_height: float = param(
         0.425, unit="m", range=(0.2, 1.0),
         help="overhead start: the camera this far above the ten points' mean, looking down",

@@ -76,7 +76,6 @@ def check_config(config: Chan2011Config) -> None:
     setting_for(config)  # the experiment's layout: derived and checked (ConfigError)
 
 
-_goal_configuration = goal_configuration  # the name tests/test_chan2011.py imports
 
 
 
