@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 LOCK := requirements.lock
 
-.PHONY: help figures results report test test-slow bench lint lock clean sweeps
+.PHONY: help figures results report test test-slow bench lint lock clean sweeps videos
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*##' $(MAKEFILE_LIST) | sed -E 's/:.*## /\t/' | expand -t 12
@@ -58,6 +58,10 @@ sweeps: $(STAMP)  ## the variant sweeps over the declared ranges -> results/swee
 	@for s in $(SWEEPS); do IFS=: read -r exp n cam <<< "$$s"; \
 	  $(BIN)/repro sweep "$$exp" --n "$$n" --seed 0 --camera "$${cam:-exact}" || exit 1; done
 	$(BIN)/repro figures
+	$(BIN)/repro report
+
+videos: $(STAMP)  ## an MP4 of every canonical run, replayed from its files -> figures/<paper>/videos/
+	$(BIN)/repro video --all
 	$(BIN)/repro report
 
 bench: $(STAMP)  ## controller-step, QP, NMPC and sensor timings -> results/bench.csv

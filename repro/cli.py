@@ -6,6 +6,7 @@ Subcommands::
     repro run EXP [--set KEY=VALUE]... [--video] [--out DIR [--force]]
     repro results [--force] [--paper P] [--include-slow] [-j N]
     repro figures [--paper P]             figures, then results/claims.csv
+    repro video RUN_DIR [--out FILE] [--fps N] [--size WxH] [--speed X] | --all [--paper P]
     repro report [--output REPORT.md]
 
 Global options ``--results DIR`` (default ``./results``) and ``--figures DIR``
@@ -157,6 +158,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--paper", metavar="P", default=None, help="only this paper")
     p.set_defaults(func=_cmd_figures)
 
+    p = sub.add_parser("video", help="an MP4 of a run replayed from its own files (scene.json, "
+                       "trace.csv, its URDFs); --all: one per canonical run under "
+                       "<figures>/<paper>/videos/")
+    _add_global_options(p, top_level=False)
+    p.add_argument("run_dir", nargs="?", type=_path, default=None, metavar="RUN_DIR",
+                   help="a run folder, e.g. results/thomas2024/case3")
+    p.add_argument("--all", action="store_true",
+                   help="every registered experiment's canonical run that has a time axis")
+    p.add_argument("--paper", metavar="P", default=None, help="with --all: only this paper")
+    p.add_argument("--out", type=_path, metavar="FILE", default=None,
+                   help="output file (default: RUN_DIR/video.mp4)")
+    p.add_argument("--fps", type=float, default=None, help="frames per second (default 20)")
+    p.add_argument("--size", type=_frame_size, default=None, metavar="WxH",
+                   help="frame size, multiples of 16 (default 960x480)")
+    p.add_argument("--speed", type=float, default=None,
+                   help="simulated seconds per video second (default 1, faster for runs "
+                        "longer than 40 s so the video lasts 40 s)")
+    p.set_defaults(func=_cmd_video)
+
     p = sub.add_parser("report", help="render REPORT.md")
     _add_global_options(p, top_level=False)
     p.add_argument(
@@ -164,6 +184,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.set_defaults(func=_cmd_report)
     return parser
+
+
+def _frame_size(text: str) -> tuple[int, int]:
+    """``WxH`` in pixels, e.g. ``960x480``."""
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"{text!r} is not WxH, e.g. 960x480")
+    return int(m.group(1)), int(m.group(2))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -222,7 +250,7 @@ def default_out_dir(exp: Experiment, results_dir: Path, config: Any) -> Path:
     """``<results>/<paper>/<name>``, or ``<name>__<short config hash>`` for a non-default config.
 
     Any override that changes the config gets its own directory, so the default traces are
-    never overwritten by a variant; ``--video`` is output-only (same trace, plus video.gif)
+    never overwritten by a variant; ``--video`` is output-only (same trace, plus video.mp4)
     and keeps the default directory.
     """
     base = registry.experiment_dir(results_dir, exp)
@@ -556,6 +584,42 @@ def _cmd_results(args: argparse.Namespace) -> int:
         counts += f", {len(fixed)} marked interrupted"
     print(counts)
     return code
+
+
+def _cmd_video(args: argparse.Namespace) -> int:
+    """Issue 20: ``repro video RUN_DIR`` or ``repro video --all``."""
+    from repro.replay import video
+
+    opts: dict[str, Any] = {k: v for k, v in (("fps", args.fps), ("size", args.size),
+                                              ("speed", args.speed)) if v is not None}
+    if args.all == (args.run_dir is not None):
+        raise ConfigError("give either RUN_DIR or --all")
+    if args.run_dir is not None:
+        if args.paper is not None:
+            raise ConfigError("--paper goes with --all")
+        video.check_options(**opts)
+        video.check_run_dir(args.run_dir)
+        print(f"wrote {video.write_video(args.run_dir, args.out, **opts)}")
+        return 0
+    if args.out is not None:
+        raise ConfigError("--out names one file: give RUN_DIR, or --figures for --all")
+    video.check_options(**opts)
+    papers = _select_papers(registry.load_papers(), args.paper)
+    jobs = []
+    for exp in registry.all_experiments(papers):
+        run_dir = registry.experiment_dir(args.results, exp)
+        try:
+            video.check_run_dir(run_dir)
+        except ConfigError as exc:
+            print(f"{exp.id}: no video ({_first_line(str(exc))})")
+            continue
+        jobs.append((exp, run_dir))
+    check_dir_arg(args.figures, "--figures")
+    for exp, run_dir in jobs:
+        out = video.write_video(run_dir, args.figures / exp.paper / "videos" / f"{exp.name}.mp4",
+                                **opts)
+        print(f"{exp.id}: wrote {out} ({out.stat().st_size / 1e6:.2f} MB)")
+    return 0
 
 
 def _cmd_figures(args: argparse.Namespace) -> int:

@@ -182,7 +182,7 @@ class Chan2011Config:
     points_seed: int = param(0, range=SEED_RANGE, help="seed of the dots' jitter (32-bit)",
                              sweep=SweepRange(0, 65535, when=EXPERIMENT, reason=POINTS_SEED_WHY))  # ours
     seed: int = param(0, range=SEED_RANGE, help="seed (no random element yet; 32-bit)")
-    video: bool = param(False, help="also write an animated GIF of the run (video.gif)",
+    video: bool = param(False, help="also write video.mp4, replayed from the run's files after it ends (as repro video)",
                         output_only=True)
 
 

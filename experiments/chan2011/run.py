@@ -284,7 +284,6 @@ def build(config: Chan2011Config, out_dir: Path) -> Episode:
     return Episode(scene, {"crs_a465": PositionReferenceDrive(robot, config.inner_loop,
                                                               config.pd_gain)},
                    ctrl, declare_columns(), config.duration, cameras=[rig], video=config.video,
-                   video_every=max(1, int(round(0.1 / config.dt))),
                    view=View((0.0, 0.3, 0.35), 1.0, 200, -25, 480, 360, 50),
                    snapshot_period=config.snapshot_period)
 

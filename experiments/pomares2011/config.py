@@ -86,7 +86,7 @@ class Pomares2011Config:
                            help="control steps between trace rows (a multiple of "
                                 "camera_period)")  # ours: 100 Hz rows of a 1 kHz loop keep a 25 s trace at ~5 MB
     seed: int = param(0, range=(0, 2**31 - 1), help="seed (tracking noise)")
-    video: bool = param(False, help="also write an animated GIF of the run (video.gif)",
+    video: bool = param(False, help="also write video.mp4, replayed from the run's files after it ends (as repro video)",
                         output_only=True)
 
 

@@ -200,7 +200,7 @@ def build(config: Exp3Config, out_dir: Path) -> tuple[Episode, Exp3Controller]:
     tactile.declare(cols)
     ep = Episode(scene, {"fingers": drive}, ctrl, cols, config.duration,
                  sensors=[tactile, FingerTorqueSensor(hand), audit],
-                 movers={"support": support_pose}, video=config.video, video_every=33,
+                 movers={"support": support_pose}, video=config.video,
                  view=view, snapshot_period=config.snapshot_period,
                  log_every=config.log_every)
     return ep, ctrl

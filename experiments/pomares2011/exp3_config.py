@@ -105,7 +105,7 @@ class Exp3Config:
     log_every: int = param(11, range=(1, 1000), help="control steps between trace rows (a divisor of tactile_period_ms: every tick is a row)")  # ours: 91 Hz rows, 3 per tick
     snapshot_period: float = param(0.25, unit="s", range=(0.0, 60.0), help="period of the rendered snapshots for Fig. 11 (0: none)", output_only=True)  # ours: Fig. 11's frames are the nearest snapshots to chosen instants
     seed: int = param(0, range=(0, 2**31 - 1), help="seed (nothing is random in this run)")
-    video: bool = param(False, help="also write an animated GIF of the run (video.gif)",
+    video: bool = param(False, help="also write video.mp4, replayed from the run's files after it ends (as repro video)",
                         output_only=True)
 
 

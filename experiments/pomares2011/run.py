@@ -130,7 +130,7 @@ def build(config: Pomares2011Config, out_dir: Path) -> tuple[Episode, Pomares201
     parts = build_parts(config, out_dir)
     ep = Episode(parts.scene, parts.drives, parts.ctrl, declare_columns(config.human),
                  config.duration, cameras=[parts.rig], movers=parts.movers, video=config.video,
-                 video_every=33, view=VIEW, log_every=config.log_every)
+                 view=VIEW, log_every=config.log_every)
     return ep, parts.ctrl
 
 

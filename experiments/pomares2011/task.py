@@ -304,7 +304,7 @@ def build(config: TaskConfig, out_dir: Path) -> tuple[Episode, TaskController]:
     scene.extra["task"]["cylinder"]["start_pose"] = pose_json(scene["cylinder"].T_world)
     ep = Episode(scene, parts.drives, ctrl, cols, config.duration, cameras=[parts.rig],
                  sensors=[tactile, e3.FingerTorqueSensor(chain), audit], movers=movers,
-                 video=config.video, video_every=33, view=TASK_VIEW,
+                 video=config.video, view=TASK_VIEW,
                  snapshot_period=config.snapshot_period, log_every=config.log_every)
     return ep, ctrl
 

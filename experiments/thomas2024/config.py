@@ -223,7 +223,7 @@ class Thomas2024Config:
     qp_max_iter: int = param(200, range=(1, 100000),
                              help="iteration budget per QP solve")  # ours: bounds an infeasible solve to ~2 ms
     seed: int = param(0, range=SEED_RANGE, help="seed of the sensor noise (32-bit)")
-    video: bool = param(False, help="also write an animated GIF of the run (video.gif)",
+    video: bool = param(False, help="also write video.mp4, replayed from the run's files after it ends (as repro video)",
                         output_only=True)
 
 

@@ -491,6 +491,13 @@ def _variation_note(results_dir: Path, paper: str) -> str:
             f"({', '.join(perts)}; {VARIATION_FILE}): {int(flips.sum())} flip.")
 
 
+def _video_cell(mp4: Path, base: Path) -> str:
+    """Issue 20: a link to the run's replayed video (``make videos``), if it is there."""
+    if not mp4.is_file():
+        return "-"
+    return f"[mp4]({_link(mp4, base)}) ({mp4.stat().st_size / 1e6:.1f} MB)"
+
+
 def _paper_section(
     paper: str,
     *,
@@ -539,11 +546,12 @@ def _paper_section(
                 _fmt_num(m.get("wall_time_s"), "{:.2f}"),
                 str(m.get("config_hash") or _MISSING)[:12],
                 _fmt_sha(m.get("git_sha"), m.get("git_dirty")),
+                _video_cell(figures_dir / paper / "videos" / f"{run}.mp4", base),
             )
             for run, m in runs
         ]
         headers = ("run", "experiment", "status", "reason", "rows", "wall time (s)")
-        out += [markdown_table((*headers, "config hash", "git sha"), rows), ""]
+        out += [markdown_table((*headers, "config hash", "git sha", "video"), rows), ""]
 
     out += ["### Figures", ""]
     paper_figures = figures_dir / paper

@@ -7,7 +7,7 @@ moving bodies, and the controller: a function ``step(obs) -> StepResult`` with t
 equations and nothing else. The runner owns everything else, identically for every paper:
 
 * the trace recorder and the run files (``trace.csv``, ``columns.json``, ``events.csv``,
-  ``manifest.json``, ``scene.json``, optional ``video.gif`` and ``frames/``);
+  ``manifest.json``, ``scene.json``, optional ``video.mp4`` and ``frames/``);
 * per robot (column prefix ``p``): measured joint positions ``pq{i}`` and velocities
   ``pqd{i}``, the command ``pu{i}`` as the controller gave it, and how many joints the
   drive saturated (``pn_sat``);
@@ -205,8 +205,9 @@ class Episode:
     cameras: list[CameraRig] = field(default_factory=list)
     sensors: Sequence[Sensor] = field(default_factory=list)
     movers: dict[str, Callable[[float], np.ndarray]] = field(default_factory=dict)
+    #: after the run, replay it from its files into video.mp4 (:mod:`repro.replay.video`,
+    #: the same code as ``repro video RUN_DIR``; not written for an interrupted run)
     video: bool = False
-    video_every: int = 3  # control steps between video frames
     view: View = field(default_factory=View)
     snapshot_period: float = 0.0  # [s]; 0: no frames/ snapshots
     #: Control steps between two trace rows (1: every step). The loop, the sensors, the
@@ -385,7 +386,6 @@ class _Runner:
         # the whole chains (cameras need every joint of the robot carrying them)
         self.chains = {getattr(r, "robot", r).name: getattr(r, "robot", r)
                        for r in self.robots.values()}
-        self.frames: list[np.ndarray] = []
         self.audit = {c.name: _Audit() for c in ep.cameras}
         self._flags: dict[str, bool] = {}
         self.collided: set[tuple[str, str]] = set()
@@ -656,8 +656,6 @@ class _Runner:
             if log:
                 rec.record(row)
             split["logging_s"] += clock() - tic4
-            if ep.video and k % ep.video_every == 0:
-                self.frames.append(ep.view.render(ep.scene.physics.client))
             if snap_every and k % snap_every == 0:
                 self.snapshot(k)
             if stop is not None:
@@ -689,11 +687,6 @@ class _Runner:
         rec.summary["log_every"] = ep.log_every
         rec.summary["min_over_all_steps"] = {
             c: {"min_m": d, "t_s": tt} for c, (d, tt) in sorted(self.dist_min.items())}
-        if self.frames:
-            import imageio.v2 as imageio
-
-            imageio.mimsave(self.out_dir / "video.gif", list(self.frames),  # type: ignore[arg-type]
-                            duration=ep.video_every * dt)
         return status, reason
 
 
@@ -741,7 +734,7 @@ def run_episode(ep: Episode, out_dir: Path, *, paper: str, config: Any,
     experiment = experiment or out_dir.name.split("__")[0]
     seed = int(config.seed) if seed is None else seed
     shutil.rmtree(out_dir / "frames", ignore_errors=True)  # no stale snapshots
-    (out_dir / "video.gif").unlink(missing_ok=True)
+    (out_dir / "video.mp4").unlink(missing_ok=True)
     if ep.duration <= 0:
         raise ConfigError(f"episode duration must be > 0 s, got {ep.duration}")
     try:
@@ -774,6 +767,10 @@ def run_episode(ep: Episode, out_dir: Path, *, paper: str, config: Any,
             rec.close(status, reason)
     finally:
         ep.scene.close()
+    if ep.video and status != "interrupted":
+        from repro.replay.video import write_video
+
+        write_video(out_dir)  # from the files just closed, as an outsider would
     return out_dir
 
 
