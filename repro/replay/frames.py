@@ -139,8 +139,11 @@ class Replayer:
             if found:
                 c = (int(round(u * s)), int(round(v * s)))
                 cv2.drawMarker(img, c, RED, cv2.MARKER_CROSS, 9, 1, cv2.LINE_AA)
-        cv2.putText(img, f"{name} ({cam['mode']})", (4, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.38,
-                    WHITE, 1, cv2.LINE_AA)
+        label = f"{name} ({cam['mode']})"
+        (tw, th), _ = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, 0.38, 1)
+        cv2.rectangle(img, (0, 0), (tw + 8, th + 8), (40, 40, 40), -1)  # legible on any scene
+        cv2.putText(img, label, (4, th + 3), cv2.FONT_HERSHEY_SIMPLEX, 0.38, WHITE, 1,
+                    cv2.LINE_AA)
         return img
 
     def caption(self, row: pd.Series, speed: float, height: int) -> np.ndarray:

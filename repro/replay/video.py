@@ -9,10 +9,10 @@ crosses, ``<prefix><i>_u`` where ``_found``) drawn; beneath, a caption with the 
 playback speed, the phase (a ``phase`` column) and the latest events of ``events.csv``.
 Nothing of the experiment's code is used: what an outsider can do with the folder.
 
-The external view is framed automatically (:func:`repro.replay.view.auto_view`; no paper prescribes a view):
-it looks at the bounding box of the robots' links and the bodies near them over the run,
-over the robot's shoulder; its background (no body) is drawn light blue-grey so that white
-links stand out.
+The external view is framed automatically (:func:`repro.replay.view.auto_view`; no paper
+prescribes a view): it looks at the bounding box of the robots' links and the bodies near
+them over the run, from the first of a few directions that shows both; its background (no
+body) is drawn light blue-grey so that white links stand out.
 """
 
 from __future__ import annotations

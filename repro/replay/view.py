@@ -35,25 +35,52 @@ class ExternalView:
         return list(view), list(proj)
 
 
-def auto_view(world: ReplayWorld, trace: pd.DataFrame, n_rows: int = 7, turn_deg: float = 215.0,
-              pitch_deg: float = 40.0) -> ExternalView:
+#: (turn, pitch) [deg] tried by :func:`auto_view`, in order of preference: the turn about
+#: the vertical away from the direction robots -> bodies (180: behind the robot).
+CANDIDATES = ((215.0, 40.0), (145.0, 40.0), (215.0, 60.0), (145.0, 60.0), (90.0, 35.0),
+              (270.0, 35.0), (35.0, 35.0))
+SCORE_SIZE = (160, 120)  # [px] the small renders that score a candidate
+PREFER = 0.9  # ours: the first candidate within 10 % of the best score wins (near ties)
+
+
+def _look(target: np.ndarray, d: np.ndarray, dist: float, turn_deg: float, pitch_deg: float
+          ) -> ExternalView:
+    yaw, pitch = np.radians(turn_deg), np.radians(pitch_deg)
+    d = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]) @ d
+    eye = target + dist * np.array([np.cos(pitch) * d[0], np.cos(pitch) * d[1], np.sin(pitch)])
+    return ExternalView((float(eye[0]), float(eye[1]), float(eye[2])),
+                        (float(target[0]), float(target[1]), float(target[2])))
+
+
+def auto_view(world: ReplayWorld, trace: pd.DataFrame, n_rows: int = 7) -> ExternalView:
     """Frame the robots' links and the bodies within :data:`REACH_M` of them over the run.
 
-    The eye looks at the centre of their bounding box, from ``turn_deg`` about the vertical
-    away from the direction robots -> bodies (215 deg: behind the robot, over its shoulder)
-    and ``pitch_deg`` above the horizontal, at the distance where the box's half-diagonal
-    fills 0.95 of the half field of view (ours: chosen on a contact sheet of every paper's
-    runs, the one where neither the robot nor its obstacles hide the other)."""
-    links, bodies = [], []
-    for k in np.linspace(0, len(trace) - 1, min(n_rows, len(trace))).round().astype(int):
+    The eye looks at the centre of their bounding box from the distance where the box's
+    half-diagonal fills 0.95 of the half field of view. Its direction is the first of
+    :data:`CANDIDATES` that shows both the robots and those bodies within :data:`PREFER`
+    of the best (ours: no paper prescribes a view): small segmentation renders at three
+    rows score each candidate by the smaller of its robot pixels and its body pixels, each
+    relative to the best candidate's, so that neither hides the other."""
+    sample = np.linspace(0, len(trace) - 1, min(n_rows, len(trace))).round().astype(int)
+    links: list[np.ndarray] = []
+    bodies: dict[str, list[tuple[float, float, float]]] = {}
+    robots = [n for n, b in world.bodies.items() if b["kind"] == "urdf"]
+    for k in sample:
         world.set_row(trace.iloc[int(k)])
         links.append(world.link_positions())
-        bodies.append(world.body_positions())
-    robot, other = np.vstack(links), np.vstack(bodies)
-    if len(other) and len(robot):
-        near = np.min(np.linalg.norm(other[:, None] - robot[None], axis=2), axis=1) < REACH_M
-        other = other[near]
-    pts = np.vstack([robot, other]) if len(robot) else other
+        for name, ids in world.ids.items():
+            if name not in robots and ids:
+                bodies.setdefault(name, []).extend(
+                    p.getBasePositionAndOrientation(bid, physicsClientId=world.client)[0]
+                    for bid, _ in ids)
+    robot = np.vstack(links)
+    near = [n for n, pts in bodies.items() if len(robot) == 0 or np.min(np.linalg.norm(
+        np.asarray(pts)[:, None] - robot[None], axis=2)) < REACH_M]
+    other = np.asarray([q for n in near for q in bodies[n]], dtype=float).reshape(-1, 3)
+    if len(other) and len(robot):  # a body parked far away part of the run is framed near
+        other = other[np.min(np.linalg.norm(other[:, None] - robot[None], axis=2),
+                             axis=1) < REACH_M]
+    pts = np.vstack([robot, other])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     target = (lo + hi) / 2.0
     radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.15)
@@ -61,13 +88,21 @@ def auto_view(world: ReplayWorld, trace: pd.DataFrame, n_rows: int = 7, turn_deg
     work = other.mean(axis=0) if len(other) else target + [1.0, 0.0, 0.0]
     d = (work - base)[:2]
     d = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-3 else np.array([1.0, 0.0])
-    yaw = np.radians(turn_deg)
-    d = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]) @ d
-    pitch = np.radians(pitch_deg)
     dist = 0.95 * radius / np.tan(np.radians(EXTERNAL_FOV_DEG) / 2.0)
-    eye = target + dist * np.array([np.cos(pitch) * d[0], np.cos(pitch) * d[1], np.sin(pitch)])
-    return ExternalView((float(eye[0]), float(eye[1]), float(eye[2])),
-                        (float(target[0]), float(target[1]), float(target[2])))
+    views = [_look(target, d, dist, *c) for c in CANDIDATES]
+    robot_ids = {world.ids[n][0][0] for n in robots}
+    work_ids = {bid for n in near for bid, _ in world.ids[n]}
+    counts = np.zeros((len(views), 2))
+    w, h = SCORE_SIZE
+    for k in sample[[0, len(sample) // 2, -1]]:
+        world.set_row(trace.iloc[int(k)])
+        for i, v in enumerate(views):
+            _, seg = world.render(*v.matrices(w, h), w, h, segmentation=True)
+            assert seg is not None
+            counts[i] += (np.isin(seg, list(robot_ids)).sum(), np.isin(seg, list(work_ids)).sum())
+    best = counts.max(axis=0)
+    score = np.min(counts / np.where(best > 0, best, 1.0), axis=1)
+    return views[int(np.flatnonzero(score >= PREFER * score.max())[0])]
 
 
 def frame_rows(t: np.ndarray, fps: float, speed: float) -> list[int]:
