@@ -117,6 +117,20 @@ def test_a_sweep_judges_every_variant_and_resumes(tmp_path: Path) -> None:
                                   df.drop(columns="wall_time_s"))
 
 
+def test_a_second_sweep_of_the_same_folder_is_refused_before_it_runs(tmp_path: Path) -> None:
+    """Two sweeps of one folder ran, judged and deleted each other's variant files (two
+    'missing trace.csv' failures in a real rendered subsample); the second is refused."""
+    runner = Runner()
+    papers = _papers(runner)
+    sweep_dir = tmp_path / "sweeps" / "case"
+    with registry.run_folder_lock(sweep_dir):  # as a live sweep holds it
+        with pytest.raises(ReproError, match="being swept by another repro process"):
+            run_sweep("fake.case", 2, seed=0, results_dir=tmp_path, papers=papers)
+    assert runner.calls == [] and list(sweep_dir.iterdir()) == []
+    run_sweep("fake.case", 2, seed=0, results_dir=tmp_path, papers=papers)  # free again
+    assert len(runner.calls) == 2
+
+
 def test_traces_are_kept_when_asked_and_failures_are_rows(tmp_path: Path) -> None:
     runner = Runner()
     path = run_sweep("fake.case", 4, seed=0, results_dir=tmp_path, keep_traces=True,

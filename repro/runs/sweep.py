@@ -17,13 +17,14 @@ engine other than the serial loop here (a Dask cluster) can map it over the vari
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
 import os
 import shutil
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ import pandas as pd
 from repro.errors import ConfigError, ReproError
 from repro.runs import registry
 from repro.runs.claims import Claim, ClaimResult, extent_note
-from repro.runs.registry import Experiment, Paper
+from repro.runs.registry import Experiment, Paper, run_folder_lock
 from repro.runs.sweep_rates import REFUSED
 from repro.runs.trace import load_run
 from repro.sweep_ranges import declared_ranges, sample_variants
@@ -305,7 +306,30 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
         raise ConfigError(f"{exp.id}: no claim of {exp.paper} needs only this run")
     variants = sample_variants(exp.config_cls, n, seed)
     sweep_dir = sweep_folder(Path(results_dir), exp, camera)
-    sweep_dir.mkdir(parents=True, exist_ok=True)
+    with _sweep_lock(sweep_dir):
+        return _run_locked(exp, paper, variants, n, seed, sweep_dir, Path(results_dir), camera,
+                           keep_traces, papers, on_done, engine, scheduler, workers)
+
+
+@contextlib.contextmanager
+def _sweep_lock(sweep_dir: Path) -> Iterator[None]:
+    """One sweep at a time per sweep folder: two would run, judge and delete the same
+    variants' files under each other (seen: "missing trace.csv" failures)."""
+    try:
+        with run_folder_lock(sweep_dir):
+            yield
+    except ReproError as exc:
+        if "being written by another" not in str(exc):
+            raise
+        raise ReproError(f"{sweep_dir} is being swept by another repro process; wait for it "
+                         "(a sweep resumes: rerun it afterwards to add variants)") from None
+
+
+def _run_locked(exp: Experiment, paper: Paper, variants: list[dict[str, Any]], n: int,
+                seed: int, sweep_dir: Path, results_dir: Path, camera: str | None,
+                keep_traces: bool, papers: Mapping[str, Paper] | None,
+                on_done: Callable[[dict[str, Any]], None] | None, engine: str,
+                scheduler: str | None, workers: int | None) -> Path:
     if engine == "dask":
         rows = _map_dask(exp.id, variants, camera, sweep_dir, keep_traces, papers, scheduler,
                          workers, on_done)
@@ -328,7 +352,7 @@ def run_sweep(exp_id: str, n: int, seed: int, results_dir: Path, camera: str | N
                     "workers": (1 if engine == "serial" else
                                 workers or (None if scheduler else os.cpu_count())),
                     "columns": _columns(exp, paper)}, indent=1) + "\n", encoding="utf-8")
-    _write_tables(sweep_dir, Path(results_dir), exp, paper)
+    _write_tables(sweep_dir, results_dir, exp, paper)
     return path
 
 
