@@ -48,6 +48,7 @@ SWEEPS := pomares2011.exp3:100 pomares2011.exp3_no_tactile:100 \
           pomares2011.exp1:50 pomares2011.exp1:10:render \
           pomares2011.exp2:30 pomares2011.exp2:10:render \
           chan2011.experiment:50 chan2011.experiment:15:render chan2011.simulation:200 \
+          chan2011.simulation:10:render \
           thomas2024.case1:360 thomas2024.case2:1100 thomas2024.case3:100 \
           thomas2024.case1:16:render thomas2024.case2:106:render thomas2024.case3:10:render
 # (case 1 and case 2 refuse 16 % and 91 % of their starts: 360 and 1100 variants judge >= 300
