@@ -82,8 +82,14 @@ class Replayer:
         self.manifest: dict[str, Any] = json.loads((self.dir / "manifest.json").read_text())
         self.world = ReplayWorld(self.dir)
         self.cams = self.world.scene.get("cameras", {})
-        self.cam_world = ReplayWorld(self.dir, camera_only=True) if self.cams else None
-        self.view = auto_view(self.world, self.trace)
+        self.cam_world: ReplayWorld | None = None
+        try:
+            if self.cams:
+                self.cam_world = ReplayWorld(self.dir, camera_only=True)
+            self.view = auto_view(self.world, self.trace)
+        except BaseException:
+            self.close()
+            raise
         self.col_w = self.width // 3
         self.ext_w = self.width - self.col_w
 
@@ -105,6 +111,7 @@ class Replayer:
             v = row[cols].to_numpy(float)
             return matrix((list(v[:3]), list(v[3:])))
         cam = self.cams[name]
+        self.world.set_row(row)  # the camera's frame at this row, not at the last one drawn
         frame = self.world.frame_pose(cam["robot"], cam["frame"])
         return matrix(frame) @ matrix(pose_of(cam["T_frame_camera"]))
 
