@@ -24,7 +24,6 @@ position [m] and quaternion (x, y, z, w).
 
 from __future__ import annotations
 
-import math
 import shutil
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
@@ -44,6 +43,7 @@ from repro.sensors.camera import (
     move_dot_target,
     spawn_dot_target,
 )
+from repro.sim.closest import ClosestPoints
 from repro.sim.robot import URDF_LOAD_FLAGS, JointGroup, JointLimits, JointSet, Robot
 from repro.sim.world import World, WorldConfig, pb_to_pose, pose_to_pb
 
@@ -206,6 +206,7 @@ class Scene:
         self.run_dir = Path(run_dir) if run_dir is not None else None
         self.bodies: dict[str, SceneBody] = {}
         self._others_memo: dict[tuple[int, int], list[tuple[str, list[int]]]] = {}
+        self._closest = ClosestPoints(self.physics.client)
         #: every joint group by name (:meth:`add_joint_group`); the runner logs the groups no
         #: drive covers (positions, velocities, ground-truth distances)
         self.joint_groups: dict[str, JointGroup] = {}
@@ -499,32 +500,27 @@ class Scene:
                      ) -> list[dict[str, float]]:
         """:meth:`distances` of several robots, with one closest-points query per pair of
         PyBullet bodies: joint groups of one URDF body (the PA-10, the mini-robot and the
-        hand of one chain) share each query and keep the points on their own links."""
-        queries: dict[tuple[int, int], dict[int, float]] = {}  # link of A -> closest [m]
-        client = self.physics.client
-        out = []
-        for robot in robots:
+        hand of one chain) share each query and keep the points on their own links
+        (:class:`repro.sim.closest.ClosestPoints`: the same distances, asked with a
+        threshold hinted by the previous step)."""
+        out: list[dict[str, float]] = [{} for _ in robots]
+        chains: dict[int, tuple[JointSet, list[int]]] = {}  # id(chain) -> chain, its robots
+        for i, robot in enumerate(robots):
             full = getattr(robot, "robot", robot)  # a JointGroup's whole chain
-            links = getattr(robot, "links", None)  # a joint group's own links; None: all
-            own = None if links is None else frozenset(links)
-            dists = {}
+            chains.setdefault(id(full), (full, []))[1].append(i)
+        for full, idx in chains.values():
+            # each robot's own links (a joint group's); None: all of the chain's
+            groups = tuple(None if (links := getattr(robots[i], "links", None)) is None
+                           else frozenset(links) for i in idx)
             for name, ids in self._others(full):
-                d = max_distance
+                best = [max_distance] * len(idx)
                 for bid in ids:
-                    key = (full.body, bid)
-                    near = queries.get(key)
-                    if near is None:
-                        near = {}
-                        for pt in p.getClosestPoints(full.body, bid, max_distance,
-                                                     physicsClientId=client):
-                            if pt[8] < near.get(pt[3], math.inf):
-                                near[pt[3]] = pt[8]
-                        queries[key] = near
-                    for link, dl in near.items():
-                        if dl < d and (own is None or link in own):
-                            d = dl
-                dists[name] = float(d)
-            out.append(dists)
+                    for j, d in enumerate(self._closest.minima(full.body, bid, groups,
+                                                                max_distance)):
+                        if d < best[j]:
+                            best[j] = d
+                for j, i in enumerate(idx):
+                    out[i][name] = float(best[j])
         return out
 
     def _others(self, full: JointSet) -> list[tuple[str, list[int]]]:

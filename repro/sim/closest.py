@@ -1,0 +1,100 @@
+"""Ground-truth distances from PyBullet's closest points, one query per pair of bodies and step.
+
+:meth:`repro.sim.scene.Scene.distances_of` asks, for a robot's body A and another body B, the
+minimum distance from each of several *groups* of A's links (the joint groups of one chain:
+the PA-10, the mini-robot, the hand...) to B, capped at ``cap``. PyBullet's
+``getClosestPoints(A, B, threshold)`` returns a point for every pair of links closer than
+``threshold``, and computes one (GJK) for every pair whose bounding boxes, grown by the
+threshold, overlap: its cost grows with the threshold.
+
+:class:`ClosestPoints` asks with a smaller threshold ``T`` first: the largest of the groups'
+minima at the previous query of the same pair, plus :data:`HINT_MARGIN`. The answer is the
+same as the full query's, to the bit:
+
+* a link's closest distance does not depend on the threshold it is asked with (measured:
+  1038 per-link minima of the pomares2011 scene at random poses and thresholds 0.05-0.5 m
+  equal those of the 1 m query; ``tests/test_closest.py`` checks it on every call it makes);
+* every link closer than ``T`` is returned, so a group with a returned point no farther
+  than ``T`` has its exact minimum;
+* a group with no such point is farther than ``T``: then the pair is asked again with the
+  full ``cap`` (the first query of a pair, a group that moved away faster than the margin,
+  a group beyond ``cap``).
+
+Only the time changes (pomares2011 exp2 with the operator near: 14 queries ~640 -> ~390 us;
+``make bench``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import pybullet as p
+
+__all__ = ["HINT_MARGIN", "ClosestPoints", "group_minima"]
+
+#: Added to the previous query's largest group minimum to get the next threshold [m].
+#: ours: a speed rule, not a value rule (any margin gives the same distances): 1 cm is
+#: 10 m/s of relative motion over a 1 ms step, far above any robot or human speed here, so
+#: the fallback full query is rare.
+HINT_MARGIN = 0.01
+
+#: The links of a group: a set of PyBullet link indices, or None for every link of the body.
+Links = frozenset[int] | None
+
+
+def group_minima(points: Sequence[tuple], groups: Sequence[Links]) -> list[float]:
+    """Minimum ``contactDistance`` over the points of each group's links [m] (``inf`` where
+    a group has none), from the tuples of ``pybullet.getClosestPoints`` (link of A at index
+    3, distance at index 8)."""
+    near: dict[int, float] = {}  # link of A -> its closest distance [m]
+    for pt in points:
+        link, d = pt[3], pt[8]
+        if d < near.get(link, math.inf):
+            near[link] = d
+    out = []
+    for links in groups:
+        m = math.inf
+        for link, d in near.items():
+            if d < m and (links is None or link in links):
+                m = d
+        out.append(m)
+    return out
+
+
+class ClosestPoints:
+    """Per-group minimum distances between two PyBullet bodies, asked with a threshold hinted
+    by the previous query of the same pair and groups (see the module docstring).
+
+    Args:
+        client: the PyBullet client holding both bodies.
+    """
+
+    def __init__(self, client: int) -> None:
+        self.client = client
+        #: (body A, body B, groups) -> threshold of the next query [m]
+        self._hint: dict[tuple[int, int, tuple[Links, ...]], float] = {}
+        self.queries = 0  # getClosestPoints calls made (for tests and benchmarks)
+
+    def minima(self, body_a: int, body_b: int, groups: tuple[Links, ...], cap: float
+               ) -> list[float]:
+        """For each group of ``body_a``'s links, its minimum distance to ``body_b`` [m] (< 0:
+        penetration), or ``cap`` when farther (exactly PyBullet's answer at threshold
+        ``cap``)."""
+        key = (body_a, body_b, groups)
+        threshold = self._hint.get(key, cap)
+        if threshold < cap:
+            mins = self._ask(body_a, body_b, groups, threshold)
+            if any(m > threshold for m in mins):  # a group beyond the hint: ask everything
+                mins = self._ask(body_a, body_b, groups, cap)
+        else:
+            mins = self._ask(body_a, body_b, groups, cap)
+        out = [m if m < cap else cap for m in mins]
+        self._hint[key] = max(out, default=cap) + HINT_MARGIN
+        return out
+
+    def _ask(self, body_a: int, body_b: int, groups: tuple[Links, ...], threshold: float
+             ) -> list[float]:
+        self.queries += 1
+        pts = p.getClosestPoints(body_a, body_b, threshold, physicsClientId=self.client)
+        return group_minima(pts, groups)

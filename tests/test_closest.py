@@ -1,0 +1,106 @@
+"""The audit's closest-points queries with a hinted threshold (repro.sim.closest, issue 15):
+the same per-group distances as one query at the full cap, bit for bit, whatever the hint
+and however far a body jumps between two queries."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pybullet as p
+import pytest
+
+from repro.sim.closest import ClosestPoints, group_minima
+from repro.sim.pa10 import (
+    ALL_JOINTS,
+    ALL_LIMITS,
+    HAND_JOINTS,
+    MINI_JOINTS,
+    PA10_JOINTS,
+    pa10_urdf_path,
+)
+from repro.sim.scene import DISTANCE_CAP, Scene
+from repro.sim.world import WorldConfig
+
+
+def _brute(scene: Scene, body_a: int, body_b: int, groups: tuple, cap: float) -> list[float]:
+    """The definition: one query at the cap, the minimum over each group's links."""
+    pts = p.getClosestPoints(body_a, body_b, cap, physicsClientId=scene.physics.client)
+    out = []
+    for links in groups:
+        ds = [pt[8] for pt in pts if links is None or pt[3] in links]
+        out.append(min([cap, *ds]))
+    return out
+
+
+@pytest.fixture()
+def scene():  # type: ignore[no-untyped-def]
+    s = Scene(WorldConfig(physics_dt=1e-3, control_dt=1e-3))
+    try:
+        yield s
+    finally:
+        s.close()
+
+
+def _pose(xyz: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = xyz
+    return T
+
+
+def test_hinted_queries_equal_one_full_query(scene: Scene) -> None:
+    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
+    groups_js = [scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True),
+                 scene.add_joint_group("pa10", "mini", MINI_JOINTS, "mini_"),
+                 scene.add_joint_group("pa10", "hand", HAND_JOINTS, "bh8_")]
+    scene.add_box("table", (1.2, 0.8, 0.05), _pose(np.array([0.7, 0.0, -0.05])),
+                  (0.5, 0.5, 0.5, 1.0))
+    scene.add_capsule("limb", 0.05, 0.3, _pose(np.array([0.9, 0.4, 0.5])), (1, 0, 0, 1),
+                      moving=True)
+    groups = (None, *(frozenset(g.links) for g in groups_js))
+    rng = np.random.default_rng(3)
+    q0 = robot.q()
+    cp = ClosestPoints(scene.physics.client)
+    ids = {n: scene[n].ids[0] for n in ("table", "limb")}
+    fallbacks = 0
+    for k in range(60):
+        # small steps mostly (the hint holds); every 10th a jump (a group leaves the hint)
+        jump = k % 10 == 9
+        robot.reset(q0 + rng.normal(0.0, 0.8 if jump else 0.05, q0.shape))
+        scene.move("limb", _pose(np.array([0.9, 0.4, 0.5]) + rng.normal(
+            0.0, 0.5 if jump else 0.01, 3)))
+        for bid in ids.values():
+            before = cp.queries
+            got = cp.minima(robot.body, bid, groups, DISTANCE_CAP)
+            fallbacks += cp.queries - before - 1
+            assert got == _brute(scene, robot.body, bid, groups, DISTANCE_CAP)  # to the bit
+    assert fallbacks > 0  # the second (full) query was exercised
+    assert cp.queries < 2 * 60 * len(ids)  # ... and is not asked every time
+    # and the scene's per-robot distances are those minima
+    d = scene.distances_of(groups_js)
+    for g, dists in zip(groups_js, d, strict=True):
+        for name, bid in ids.items():
+            assert dists[name] == _brute(scene, robot.body, bid, (frozenset(g.links),),
+                                         DISTANCE_CAP)[0]
+
+
+def test_a_stale_hint_is_never_an_answer(scene: Scene) -> None:
+    """A hint from a near pose, then the body far beyond it: the cap, not a stale minimum."""
+    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
+    scene.add_capsule("limb", 0.05, 0.3, _pose(np.array([0.5, 0.3, 0.4])), (1, 0, 0, 1),
+                      moving=True)
+    bid = scene["limb"].ids[0]
+    cp = ClosestPoints(scene.physics.client)
+    near = cp.minima(robot.body, bid, (None,), DISTANCE_CAP)[0]
+    assert 0.0 < near < 0.5
+    scene.move("limb", _pose(np.array([5.0, 5.0, 0.4])))
+    assert cp.minima(robot.body, bid, (None,), DISTANCE_CAP) == [DISTANCE_CAP]
+    scene.move("limb", _pose(np.array([0.5, 0.3, 0.4])))
+    assert cp.minima(robot.body, bid, (None,), DISTANCE_CAP) == [near]
+
+
+def test_group_minima_keeps_each_groups_own_links() -> None:
+    pts = [(0, 1, 2, 5, -1, 0, 0, 0, 0.30), (0, 1, 2, 6, -1, 0, 0, 0, 0.10),
+           (0, 1, 2, 5, -1, 0, 0, 0, 0.20), (0, 1, 2, 9, -1, 0, 0, 0, -0.01)]
+    assert group_minima(pts, (None, frozenset({5}), frozenset({6, 7}), frozenset({8}))) == [
+        -0.01, 0.20, 0.10, math.inf]
