@@ -451,6 +451,49 @@ def test_log_every_keeps_the_last_step(tmp_path: Path) -> None:
     assert thin.trace["step"].tolist() == [0, 7, 14, 21, 28, 35, 42, 49, 50]
 
 
+def _lazy(tmp: Path, log_every: int, stop_at: int | None = None):  # type: ignore[no-untyped-def]
+    """Gravity compensation; the controller gives ``a`` eagerly and ``b``, ``c`` lazily
+    (functions of the step), counting the lazy calls."""
+    scene = _scene(tmp)
+    robot = scene.add_urdf("crs", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
+    robot.reset(Q0)
+    calls: list[int] = []
+    cols = Columns()
+    for name in "abc":
+        cols.add(name, "-", f"column {name}")
+
+    def ctrl(obs: Observation) -> StepResult:
+        k = obs.step
+
+        def lazy() -> dict[str, float]:
+            calls.append(k)
+            return {"b": 2.0 * k, "c": float(obs.q["crs"][0])}
+
+        stop = ("test_stop", "asked") if k == stop_at else None
+        return StepResult({"crs": robot.gravity_torques(obs.q["crs"])}, {"a": float(k)},
+                          stop=stop, lazy_columns=lazy)
+
+    ep = Episode(scene, {"crs": TorqueDrive(robot)}, ctrl, cols, 0.05, log_every=log_every)
+    return _run(ep, tmp), calls
+
+
+def test_lazy_columns_are_computed_for_written_rows_only(tmp_path: Path) -> None:
+    """StepResult.lazy_columns: called once per written row (a stop row too), never for a
+    step without one; the trace equals the one with every row, column for column."""
+    full, calls_full = _lazy(tmp_path / "full", 1)
+    thin, calls_thin = _lazy(tmp_path / "thin", 10)
+    assert calls_full == list(range(51))
+    assert calls_thin == [0, 10, 20, 30, 40, 50] == thin.trace["step"].tolist()
+    merged = full.trace.set_index("step").loc[thin.trace["step"]].reset_index()
+    assert list(thin.trace.columns) == list(full.trace.columns)
+    assert list(thin.trace.columns).index("c") == list(thin.trace.columns).index("a") + 2
+    for c in ("a", "b", "c", "q1", "u1"):
+        np.testing.assert_array_equal(merged[c].to_numpy(), thin.trace[c].to_numpy())
+    np.testing.assert_array_equal(thin.trace["b"], 2.0 * thin.trace["step"])
+    stopped, calls_stop = _lazy(tmp_path / "stop", 10, stop_at=23)
+    assert calls_stop == [0, 10, 20, 23] == stopped.trace["step"].tolist()
+
+
 @pytest.mark.parametrize("bad", [0, -1, 2.5])
 def test_log_every_is_validated(tmp_path: Path, bad: object) -> None:
     scene = _scene(tmp_path)

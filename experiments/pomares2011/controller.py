@@ -4,6 +4,8 @@ the mini-robot (or the indirect baseline), the hand idle."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from experiments.pomares2011 import scene as sc
@@ -76,7 +78,7 @@ class Pomares2011Controller:
         self.T_mc_obj: np.ndarray | None = None
         self.qd_arm = np.zeros(arm.n)
         self.arm_reached = False
-        self.rvc_cols: dict[str, float | int | bool] = {}
+        self.rvc_cols: Callable[[], dict[str, float | int | bool]] = dict  # no frame yet
         self.hybrid: HybridVSController | None = None
         self.indirect: IndirectVSController | None = None
         self.lost = False
@@ -168,24 +170,33 @@ class Pomares2011Controller:
             self.qd_arm = rvc_joint_velocity(feats, self.s_u_star, sc.RVC_INTRINSICS,
                                              self.config.rvc_gain, sc.T_FLANGE_RVC, eJ_e,
                                              np.asarray(self.arm.limits.qd_max), "scale")  # (18)
-        T_true = inv_T(T_world_mc) @ sc.OBJECT.T_world  # audit: the true object pose
-        true_u = rvc_features(sc.RVC_INTRINSICS, inv_T(T_world_rvc) @ sc.OBJECT.T_world,
-                              self.layout.points_u).uv  # audit: s_u with the true pose
-        cols: dict[str, float | int | bool] = {
-            "vvs_iter": res.iterations, "vvs_residual_px": res.residual_px,
-            "vvs_converged": res.converged,
-            "vvs_pos_err_m": float(np.linalg.norm(res.T_cam_obj[:3, 3] - T_true[:3, 3])),
-            "vvs_rot_err_deg": float(np.degrees(np.arccos(np.clip(
-                0.5 * (np.trace(res.T_cam_obj[:3, :3].T @ T_true[:3, :3]) - 1.0), -1.0, 1.0)))),
-            "e_u_px": e_u, "arm_reached": self.arm_reached}
-        for pre, T in (("vvs_", res.T_cam_obj), ("vvs_true_", T_true)):  # issue 17 item 12
-            pos, quat = pose_to_pb(T)
-            for a, v in zip(("x", "y", "z", "qx", "qy", "qz", "qw"), (*pos, *quat), strict=True):
-                cols[f"{pre}{a}"] = float(v)
-        for i in range(N):
-            cols[f"su{i + 1}_u"], cols[f"su{i + 1}_v"] = feats.uv[i]
-            cols[f"su{i + 1}_u_true"], cols[f"su{i + 1}_v_true"] = true_u[i]
-        self.rvc_cols = cols
+        reached = self.arm_reached
+
+        def audit() -> dict[str, float | int | bool]:
+            """This frame's RVC columns: the VVS pose and its error against the true pose
+            (audit), the RVC features, with the true pose's beside them."""
+            T_true = inv_T(T_world_mc) @ sc.OBJECT.T_world  # audit: the true object pose
+            true_u = rvc_features(sc.RVC_INTRINSICS, inv_T(T_world_rvc) @ sc.OBJECT.T_world,
+                                  self.layout.points_u).uv  # audit: s_u with the true pose
+            cols: dict[str, float | int | bool] = {
+                "vvs_iter": res.iterations, "vvs_residual_px": res.residual_px,
+                "vvs_converged": res.converged,
+                "vvs_pos_err_m": float(np.linalg.norm(res.T_cam_obj[:3, 3] - T_true[:3, 3])),
+                "vvs_rot_err_deg": float(np.degrees(np.arccos(np.clip(
+                    0.5 * (np.trace(res.T_cam_obj[:3, :3].T @ T_true[:3, :3]) - 1.0),
+                    -1.0, 1.0)))),
+                "e_u_px": e_u, "arm_reached": reached}
+            for pre, T in (("vvs_", res.T_cam_obj), ("vvs_true_", T_true)):  # issue 17 item 12
+                pos, quat = pose_to_pb(T)
+                for a, v in zip(("x", "y", "z", "qx", "qy", "qz", "qw"), (*pos, *quat),
+                                strict=True):
+                    cols[f"{pre}{a}"] = float(v)
+            for i in range(N):
+                cols[f"su{i + 1}_u"], cols[f"su{i + 1}_v"] = feats.uv[i]
+                cols[f"su{i + 1}_u_true"], cols[f"su{i + 1}_v_true"] = true_u[i]
+            return cols
+
+        self.rvc_cols = _Once(audit)  # computed only if a row of this frame is written
 
     def _human(self, q: np.ndarray, t: float, step: int, events: list[tuple[str, str]]
                ) -> tuple[HumanDistance | None, dict[str, float | str]]:
@@ -261,26 +272,46 @@ class Pomares2011Controller:
                                         J_g, G, M)
             diag = {"V": lyapunov(obs.qd["mini"], M, self.s_star.ravel() - f.uv.ravel(),
                                   self.hybrid.config.k_P), "e2": 0.0, "active": False}
-        # audit (issue 18): V (10) with the exact projections through the true camera pose
-        # in place of the detected points (eq. (15) is about the law with exact features)
-        uv_true, _ = project_points(sc.INTRINSICS, self.chain.frame_pose(
-            "mini_camera_optical", q), self._P_world)
-        rows = diag.get("rows", list(range(self.s_star.size)))
-        e_true = (self.s_star.ravel() - uv_true.ravel())[rows]
-        V_true = lyapunov(obs.qd["mini"], M, e_true, self.hybrid.config.k_P)
         active = bool(diag["active"])
         if active != self.was_active and hd is not None:
             events.append(("secondary_task_on" if active else "secondary_task_off",
                            f"dist = {hd.dist:.3f} m {'<' if active else '>='} dmin = "
                            f"{self.config.dmin} m ({hd.pair})"))
         self.was_active = active
-        e_y = float(f.uv.ravel()[sc.PRIMARY_TASK_ROW] - sc.PRIMARY_TASK_TARGET_PX)
-        flange = self.chain.frame_pose("pa10_flange", q)[:3, 3]
-        cols: dict[str, float | int | str | bool] = dict(self.rvc_cols)
-        cols.update(V=diag["V"], V_true=V_true, e_s_px=float(np.sqrt(np.mean(np.sum(
-            (f.uv - self.s_star) ** 2, axis=1)))), e_f2y_px=e_y, e2=diag["e2"],
-            secondary_active=active, flange_x=flange[0], flange_y=flange[1],
-            flange_z=flange[2], **cols_h)
-        return StepResult({"arm": self.qd_arm, "mini": tau, "fingers": self.hand_hold.copy()},
-                          cols, events)
+        rvc_cols, qd_mini, k_P = self.rvc_cols, obs.qd["mini"], self.hybrid.config.k_P
 
+        def columns() -> dict[str, float | int | str | bool]:
+            """The step's columns (for a row that is written): the RVC's, V (10) and its
+            audit twin, the image errors, the flange position, the human distance."""
+            # audit (issue 18): V (10) with the exact projections through the true camera
+            # pose in place of the detected points (eq. (15) is about the law with exact
+            # features)
+            uv_true, _ = project_points(sc.INTRINSICS, self.chain.frame_pose(
+                "mini_camera_optical", q), self._P_world)
+            rows = diag.get("rows", list(range(self.s_star.size)))
+            e_true = (self.s_star.ravel() - uv_true.ravel())[rows]
+            V_true = lyapunov(qd_mini, M, e_true, k_P)
+            e_y = float(f.uv.ravel()[sc.PRIMARY_TASK_ROW] - sc.PRIMARY_TASK_TARGET_PX)
+            flange = self.chain.frame_pose("pa10_flange", q)[:3, 3]
+            cols: dict[str, float | int | str | bool] = dict(rvc_cols())
+            cols.update(V=diag["V"], V_true=V_true, e_s_px=float(np.sqrt(np.mean(np.sum(
+                (f.uv - self.s_star) ** 2, axis=1)))), e_f2y_px=e_y, e2=diag["e2"],
+                secondary_active=active, flange_x=flange[0], flange_y=flange[1],
+                flange_z=flange[2], **cols_h)
+            return cols
+
+        return StepResult({"arm": self.qd_arm, "mini": tau, "fingers": self.hand_hold.copy()},
+                          {}, events, lazy_columns=columns)
+
+
+class _Once:
+    """A function of no argument called at most once; its value is kept."""
+
+    def __init__(self, fn: Callable[[], dict[str, float | int | bool]]) -> None:
+        self.fn: Callable[[], dict[str, float | int | bool]] | None = fn
+        self.value: dict[str, float | int | bool] = {}
+
+    def __call__(self) -> dict[str, float | int | bool]:
+        if self.fn is not None:
+            self.value, self.fn = self.fn(), None
+        return self.value

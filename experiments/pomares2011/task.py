@@ -38,6 +38,7 @@ import copy
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pybullet as p
@@ -211,9 +212,14 @@ class TaskController:
             self.hand.begin(obs.t, events)
         h = self.hand(obs)
         command = {**a.command, "fingers": h.command["fingers"]}
-        cols = {**a.columns, **h.columns, "task_phase": self.phase}
-        return StepResult(command, cols, events + list(h.events), h.stop, a.fallback,
-                          log_row=bool(h.columns.get("tick", False)))
+        phase = self.phase
+
+        def columns() -> dict[str, Any]:
+            """The approach's columns, the hand's, the phase (for a row that is written)."""
+            return {**a.trace_columns(), **h.columns, "task_phase": phase}
+
+        return StepResult(command, {}, events + list(h.events), h.stop, a.fallback,
+                          log_row=bool(h.columns.get("tick", False)), lazy_columns=columns)
 
 
 def build(config: TaskConfig, out_dir: Path) -> tuple[Episode, TaskController]:

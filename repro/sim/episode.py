@@ -169,6 +169,17 @@ class StepResult:
     stop: tuple[str, str] | None = None
     fallback: bool = False
     log_row: bool = False
+    #: more columns, computed only for a row that is written (audits and diagnostics a
+    #: controller logs but does not act on: at 1 kHz with a row every 10 steps, 9 of 10 would
+    #: be thrown away). Called at most once, in the same step, before the controller's next
+    #: call; it must not change the controller's state. Its columns follow ``columns``.
+    lazy_columns: Callable[[], Mapping[str, Scalar]] | None = None
+
+    def trace_columns(self) -> dict[str, Scalar]:
+        """``columns``, then ``lazy_columns()`` (for the row of this step)."""
+        if self.lazy_columns is None:
+            return dict(self.columns)
+        return {**self.columns, **self.lazy_columns()}
 
 
 @dataclass(frozen=True)
@@ -320,6 +331,12 @@ def runner_columns(ep: Episode) -> Columns:
     return cols
 
 
+def _joint_column_names(pre: str, n: int) -> tuple[list[str], list[str], list[str], str]:
+    """The columns ``<pre>q{i}``, ``<pre>qd{i}``, ``<pre>u{i}`` (1-based) and ``<pre>n_sat``."""
+    return ([f"{pre}q{i + 1}" for i in range(n)], [f"{pre}qd{i + 1}" for i in range(n)],
+            [f"{pre}u{i + 1}" for i in range(n)], f"{pre}n_sat")
+
+
 # ----------------------------------------------------------------------------- audit
 def _visible(scene: Scene, T_wc: np.ndarray, P_world: np.ndarray, normal: np.ndarray,
              uv: np.ndarray, Z: np.ndarray, cam: Camera) -> np.ndarray:
@@ -390,6 +407,14 @@ class _Runner:
         self._flags: dict[str, bool] = {}
         self.collided: set[tuple[str, str]] = set()
         self.held: dict[str, tuple[Features, dict[str, Scalar]]] = {}
+        #: every joint set whose ground-truth distances are logged, observed ones first
+        self._groups = list({**self.observed, **self.robots}.items())
+        self._group_sets = [g for _, g in self._groups]
+        #: the joint columns of each drive and observed group, named once
+        self._joint_cols = {name: _joint_column_names(d.robot.column_prefix, d.robot.n)
+                            for name, d in ep.drives.items()}
+        self._observed_cols = {name: _joint_column_names(g.column_prefix, g.n)
+                               for name, g in self.observed.items()}
         self.dist_min: dict[str, tuple[float, float]] = {}  # column -> (min [m], at t [s])
         #: per (column prefix, bodies): the distance columns and which bodies are obstacles
         self._dist_cols: dict[tuple[str, tuple[str, ...]],
@@ -405,21 +430,20 @@ class _Runner:
             self.rec.event(t, k, kind + "_end", end_detail)
         self._flags[key] = now
 
-    def measure(self, cam: CameraRig, q: np.ndarray, t: float, k: int,
-                row: dict[str, Scalar]) -> Features:
-        """Take a frame every ``cam.period`` steps; hold the last one in between."""
+    def measure(self, cam: CameraRig, q: np.ndarray, t: float, k: int
+                ) -> tuple[Features, dict[str, Scalar], bool]:
+        """Take a frame every ``cam.period`` steps; hold the last one in between. Returns the
+        features, the frame's trace columns (held ones between frames) and whether the frame
+        is new (``<name>_new_frame``)."""
         held = self.held.get(cam.name)
         if held is not None and k % cam.period:
-            feats, cols = held
-            row.update(cols)
-            row[f"{cam.name}_new_frame"] = False
-            return feats
-        before = set(row)
-        feats = self._measure(cam, q, t, k, row)
+            return held[0], held[1], False
+        cols: dict[str, Scalar] = {}
+        feats = self._measure(cam, q, t, k, cols)
         if cam.period > 1:
-            row[f"{cam.name}_new_frame"] = True
-        self.held[cam.name] = (feats, {c: v for c, v in row.items() if c not in before})
-        return feats
+            cols[f"{cam.name}_new_frame"] = True
+        self.held[cam.name] = (feats, cols)
+        return feats, cols, True
 
     def _measure(self, cam: CameraRig, q: np.ndarray, t: float, k: int,
                  row: dict[str, Scalar]) -> Features:
@@ -489,17 +513,17 @@ class _Runner:
                        f"{cam.name} point {j} visible again or no longer found")
         return Features(uv, found, Z)
 
-    def ground_truth(self, t: float, k: int, row: dict[str, Scalar], log: bool = True) -> None:
-        """Distances (every step: events, minima) and, on a logged row, the moving bodies'
-        poses."""
+    def ground_truth(self, t: float, k: int, row: dict[str, Scalar] | None) -> None:
+        """Distances at every step (collision events, the minima over all steps); their
+        columns and the moving bodies' poses only into a row that is written (``row`` not
+        None)."""
         scene = self.ep.scene
-        groups = {**self.observed, **self.robots}
-        for (name, robot), dists in zip(groups.items(), scene.distances_of(list(groups.values())),
+        best_of = self.dist_min
+        for (name, robot), dists in zip(self._groups, scene.distances_of(self._group_sets),
                                         strict=True):
-            pre = robot.column_prefix
-            cols, col_min, obstacle = self._distance_columns(pre, dists)
+            cols, col_min, obstacle = self._distance_columns(robot.column_prefix, dists)
+            d_min = math.inf
             for body, d in dists.items():
-                row[cols[body]] = d
                 if d <= 0.0 and (name, body) not in self.collided:
                     self.collided.add((name, body))
                     # an obstacle touched is a collision; a body the robot touches on purpose
@@ -508,13 +532,20 @@ class _Runner:
                     self.rec.summary[f"{'collided' if hit else 'touched'}_{body}"] = True
                     self.rec.event(t, k, "collision" if hit else "contact",
                                    f"{name} touches {body} (distance {d:.4f} m)")
-            d_min = min([d for b, d in dists.items() if obstacle[b]], default=math.nan)
-            row[col_min] = d_min
-            best_of = self.dist_min
-            for body, d in dists.items():
-                self._keep_min(best_of, cols[body], d, t)
+                if obstacle[body] and d < d_min:
+                    d_min = d
+                col = cols[body]
+                best = best_of.get(col)  # the smallest finite distance and its time
+                if math.isfinite(d) and (best is None or d < best[0]):
+                    best_of[col] = (float(d), t)
+            if d_min == math.inf:
+                d_min = math.nan  # no obstacle
             self._keep_min(best_of, col_min, d_min, t)
-        if not log:
+            if row is not None:
+                for body, d in dists.items():
+                    row[cols[body]] = d
+                row[col_min] = d_min
+        if row is None:
             return
         for moving in scene.moving_bodies():
             pos, quat = pose_to_pb(moving.T_world)
@@ -542,6 +573,38 @@ class _Runner:
         best = best_of.get(col)
         if math.isfinite(d) and (best is None or d < best[0]):
             best_of[col] = (float(d), t)
+
+    def _row(self, t: float, k: int,
+             frames: list[tuple[CameraRig, Features, dict[str, Scalar], bool]],
+             sensor_parts: list[Mapping[str, Scalar]], t_ctrl: float,
+             amend_parts: list[Mapping[str, Scalar]], res: StepResult,
+             commanded: list[tuple[str, np.ndarray, np.ndarray]],
+             q: Mapping[str, np.ndarray], qd: Mapping[str, np.ndarray]) -> dict[str, Scalar]:
+        """The trace row of a step that is written, in column order (the distances and the
+        moving bodies' poses follow, from :meth:`ground_truth`)."""
+        row: dict[str, Scalar] = {"t": t, "step": k}
+        for cam, _, cols, fresh in frames:
+            row.update(cols)
+            if cam.period > 1:
+                row[f"{cam.name}_new_frame"] = fresh
+        for part in sensor_parts:
+            row.update(part)
+        row["ctrl_s"] = t_ctrl
+        for part in amend_parts:
+            row.update(part)
+        row.update(res.trace_columns())
+        for name, u, applied in commanded:
+            names_q, names_qd, names_u, name_sat = self._joint_cols[name]
+            for i, (cq, cqd, cu) in enumerate(zip(names_q, names_qd, names_u, strict=True)):
+                row[cq] = float(q[name][i])
+                row[cqd] = float(qd[name][i])
+                row[cu] = float(u[i])
+            row[name_sat] = int(np.sum(np.abs(applied - u) > 1e-12))
+        for name, group in self.observed.items():
+            names_q, names_qd, _, _ = self._observed_cols[name]
+            for cq, cqd, qi, qdi in zip(names_q, names_qd, group.q(), group.qd(), strict=True):
+                row[cq], row[cqd] = float(qi), float(qdi)
+        return row
 
     def snapshot(self, k: int) -> None:
         import imageio.v2 as imageio
@@ -574,7 +637,6 @@ class _Runner:
             progress.update(k)
             tic0 = clock()
             t = k * dt
-            row: dict[str, Scalar] = {"t": t, "step": k}
             for name, T_of_t in ep.movers.items():
                 ep.scene.move(name, T_of_t(t))
             ep.scene.refresh_dynamic()  # free bodies: where the physics put them
@@ -585,13 +647,16 @@ class _Runner:
                 qd.setdefault(name, chain.qd())
             tic1 = clock()
             split["scene_s"] += tic1 - tic0
-            feats = {c.name: self.measure(c, q[c.robot.name], t, k, row) for c in ep.cameras}
+            # the row's parts, in column order; a row is assembled only when it is written
+            frames = [(c, *self.measure(c, q[c.robot.name], t, k)) for c in ep.cameras]
+            feats = {c.name: f for c, f, _, _ in frames}
             readings = {s.name: s.read(t, q) for s in ep.sensors}
             split["sensors_s"] += clock() - tic1
             failed_sensor = None
+            sensor_parts = []
             for s in ep.sensors:
                 sensor_cols = s.columns(readings[s.name])
-                row.update(sensor_cols)
+                sensor_parts.append(sensor_cols)
                 # a sensor's ground-truth distances (pomares2011 hand_dist_*) join the
                 # per-step minima; which columns they are is found once per sensor
                 dist_cols = self._sensor_dist_cols.get(s.name)
@@ -606,14 +671,13 @@ class _Runner:
             tic = time.perf_counter()
             res = ep.controller(Observation(t, k, q, qd, feats, readings))
             t_ctrl = time.perf_counter() - tic
-            row["ctrl_s"] = t_ctrl
             split["controller_s"] += t_ctrl
             tic2 = clock()
-            for s in ep.sensors:  # columns a sensor can only give once the controller ran
+            amend_parts = []  # columns a sensor can only give once the controller ran
+            for s in ep.sensors:
                 amend = getattr(s, "after_control", None)
                 if amend is not None:
-                    row.update(amend(readings[s.name]))
-            row.update(res.columns)
+                    amend_parts.append(amend(readings[s.name]))
             for kind, detail in res.events:
                 rec.event(t, k, kind, detail)
             stop = res.stop
@@ -622,11 +686,12 @@ class _Runner:
                 status, reason = "failed", f"sensor failure at t = {t:.3f} s: {failed_sensor}"
                 stop = ("sensor_failed", reason + "; safe command sent, run stopped")
                 rec.event(t, k, *stop)
+            commanded = []  # (drive, command as given, as applied)
             for name, drive in ep.drives.items():
-                u = np.asarray(res.command.get(name, drive.safe_command()), dtype=float)
+                u = np.asarray(res.command[name] if name in res.command
+                               else drive.safe_command(), dtype=float)
                 if failed_sensor is not None:
                     u = drive.safe_command()
-                pre = drive.robot.column_prefix
                 if u.shape != (drive.robot.n,) or not np.isfinite(u).all():
                     rec.event(t, k, "nan_command", f"{name}: controller command {u.tolist()} "
                               "is not a finite vector of the right size; safe command sent, "
@@ -634,26 +699,21 @@ class _Runner:
                     u = drive.safe_command()
                     status, reason = "failed", f"non-finite command for {name} at t = {t:.3f} s"
                     stop = ("nan_command", reason)
-                applied = drive.command(u, dt)
-                for i in range(drive.robot.n):
-                    row[f"{pre}q{i + 1}"] = float(q[name][i])
-                    row[f"{pre}qd{i + 1}"] = float(qd[name][i])
-                    row[f"{pre}u{i + 1}"] = float(u[i])
-                row[f"{pre}n_sat"] = int(np.sum(np.abs(applied - u) > 1e-12))
-            for group in self.observed.values():
-                pre = group.column_prefix
-                for i, (qi, qdi) in enumerate(zip(group.q(), group.qd(), strict=True)):
-                    row[f"{pre}q{i + 1}"], row[f"{pre}qd{i + 1}"] = float(qi), float(qdi)
+                commanded.append((name, u, drive.command(u, dt)))
             log = k % ep.log_every == 0 or k == n_steps or stop is not None or res.log_row
+            row: dict[str, Scalar] | None = None
+            if log:
+                row = self._row(t, k, frames, sensor_parts, t_ctrl, amend_parts, res,
+                                commanded, q, qd)
             tic3 = clock()
             split["drives_s"] += tic3 - tic2
-            self.ground_truth(t, k, row, log)
+            self.ground_truth(t, k, row)
             tic4 = clock()
             split["audit_s"] += tic4 - tic3
-            if k == 0:
-                self.cols.check(row)
-                self.cols.write(self.out_dir / COLUMNS_FILE, row)
-            if log:
+            if row is not None:
+                if k == 0:
+                    self.cols.check(row)
+                    self.cols.write(self.out_dir / COLUMNS_FILE, row)
                 rec.record(row)
             split["logging_s"] += clock() - tic4
             if snap_every and k % snap_every == 0:
