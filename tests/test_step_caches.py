@@ -11,6 +11,8 @@ uncached code gives, bit for bit, and must notice when its input changes.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 import pybullet as p
@@ -91,6 +93,32 @@ def test_weight_matrix_memo_follows_its_input() -> None:
     assert np.array_equal(ctrl._weight_matrix(L1, rows), weight_matrix(L1, rows))
     assert np.array_equal(ctrl._weight_matrix(L2, rows), weight_matrix(L2, rows))
     assert np.array_equal(ctrl._weight_matrix(L2, [1]), weight_matrix(L2, [1]))
+
+
+def test_primary_task_memo_gives_the_uncached_torques() -> None:
+    """HybridVSController.step keeps (e_s, W, e1, e) of the last bit-identical (s, L_s, rows):
+    each step equals a fresh controller's, across held and new frames, the secondary task
+    switching on and off, and M = None (V not computed, all else the same)."""
+    rng = np.random.default_rng(5)
+    cfg = HybridVSConfig(rng.normal(size=8), 2.0, np.diag([0.3, 0.2, 0.1]), 0.5, 0.3,
+                         avoid_rows=(1,))
+    ctrl = HybridVSController(cfg)
+    frames = [(rng.normal(size=8), rng.normal(size=(8, 6))) for _ in range(3)]
+    M = np.diag([1.0, 2.0, 3.0])
+    for k in range(24):
+        s, L = frames[(k // 4) % 3]  # a frame held for 4 steps, then the next
+        qd, J_g, G = rng.normal(size=3), rng.normal(size=(6, 3)), rng.normal(size=3)
+        dist = 0.2 if k % 7 < 3 else 0.5  # the secondary task on and off
+        grad = rng.normal(size=6)
+        tau, diag = ctrl.step(np.zeros(3), qd, s.copy(), L.copy(), J_g, G, None, dist, grad)
+        tau_ref, ref = HybridVSController(cfg).step(np.zeros(3), qd, s, L, J_g, G, M, dist,
+                                                    grad)
+        assert tau.tobytes() == tau_ref.tobytes()
+        for key in ("e", "e_s", "e1", "rows", "active", "e2"):
+            assert np.array_equal(diag[key], ref[key]), key
+        assert math.isnan(diag["V"]) and math.isfinite(ref["V"])
+    with pytest.raises(ValueError, match="finite"):  # a new frame is still validated
+        ctrl.step(np.zeros(3), qd, np.full(8, np.nan), L, J_g, G, None)
 
 
 def test_scene_others_follow_added_bodies() -> None:

@@ -85,8 +85,13 @@ class Pomares2011Controller:
         self.was_active = False
         self.held_human: tuple[HumanDistance, dict[str, float | str]] | None = None
         self._L_memo: tuple[bytes, np.ndarray] | None = None
+        self._mini_ix = np.ix_(mini.idx, mini.idx)
         #: audit: the dots' model points in the world (the part is fixed) [m], for V_true
         self._P_world = sc.POINTS_P @ sc.OBJECT.T_world[:3, :3].T + sc.OBJECT.T_world[:3, 3]
+
+    def _mini_mass(self, q: np.ndarray) -> np.ndarray:
+        """The mini-robot's block of the chain's joint-space inertia M(q) [kg m^2]."""
+        return self.chain.mass_matrix(q)[self._mini_ix]
 
     def _interaction(self, uv: np.ndarray, T_mc_obj: np.ndarray) -> np.ndarray:
         """L_px at the detected points with the depths of the VVS pose; between frames both
@@ -259,18 +264,19 @@ class Pomares2011Controller:
             events.append(self._gains(q, f.uv, L_px))
         assert self.hybrid is not None
         J_g = self.chain.frame_jacobian("mini_camera_optical", q)[:, self.mini.idx]
-        M = self.chain.mass_matrix(q)[np.ix_(self.mini.idx, self.mini.idx)]
         G = self.mini.gravity_torques()
         hd, cols_h = self._human(q, obs.t, obs.step, events)
         use = hd if (hd is not None and self.config.secondary_task) else None
+        M_now: np.ndarray | None = None  # M(q), for V (10) only: found when a row needs it
         if self.indirect is None:
             tau, diag = self.hybrid.step(q[self.mini.idx], obs.qd["mini"], f.uv.ravel(), L_px,
-                                         J_g, G, M, use.dist if use else None,
+                                         J_g, G, None, use.dist if use else None,
                                          use.grad if use else None)
         else:  # the baseline has no secondary task; V (10) with the direct gain, to compare
+            M_now = self._mini_mass(q)
             tau, _ = self.indirect.step(q[self.mini.idx], obs.qd["mini"], f.uv.ravel(), L_px,
-                                        J_g, G, M)
-            diag = {"V": lyapunov(obs.qd["mini"], M, self.s_star.ravel() - f.uv.ravel(),
+                                        J_g, G, M_now)
+            diag = {"V": lyapunov(obs.qd["mini"], M_now, self.s_star.ravel() - f.uv.ravel(),
                                   self.hybrid.config.k_P), "e2": 0.0, "active": False}
         active = bool(diag["active"])
         if active != self.was_active and hd is not None:
@@ -286,6 +292,8 @@ class Pomares2011Controller:
             # audit (issue 18): V (10) with the exact projections through the true camera
             # pose in place of the detected points (eq. (15) is about the law with exact
             # features)
+            M = self._mini_mass(q) if M_now is None else M_now
+            V = lyapunov(qd_mini, M, diag["e_s"], k_P) if M_now is None else diag["V"]  # (10)
             uv_true, _ = project_points(sc.INTRINSICS, self.chain.frame_pose(
                 "mini_camera_optical", q), self._P_world)
             rows = diag.get("rows", list(range(self.s_star.size)))
@@ -294,7 +302,7 @@ class Pomares2011Controller:
             e_y = float(f.uv.ravel()[sc.PRIMARY_TASK_ROW] - sc.PRIMARY_TASK_TARGET_PX)
             flange = self.chain.frame_pose("pa10_flange", q)[:3, 3]
             cols: dict[str, float | int | str | bool] = dict(rvc_cols())
-            cols.update(V=diag["V"], V_true=V_true, e_s_px=float(np.sqrt(np.mean(np.sum(
+            cols.update(V=V, V_true=V_true, e_s_px=float(np.sqrt(np.mean(np.sum(
                 (f.uv - self.s_star) ** 2, axis=1)))), e_f2y_px=e_y, e2=diag["e2"],
                 secondary_active=active, flange_x=flange[0], flange_y=flange[1],
                 flange_z=flange[2], **cols_h)

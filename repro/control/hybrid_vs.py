@@ -58,6 +58,7 @@ Readings we had to make (each marked ``# ours:`` at the code):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -469,6 +470,11 @@ class HybridVSController:
         #: ``W`` of the last (L_s, rows): between camera frames the features, and so L_s,
         #: are held, and the SVD of Sec. 3.1 would give the same W again
         self._W_memo: tuple[bytes, tuple[int, ...], np.ndarray] | None = None
+        #: (e_s, W, e1) of eqs. (1)-(2) for the last bit-identical (s, L_s, rows), and e of
+        #: (3) without the secondary task (None until asked): the same between frames
+        self._primary_memo: tuple[tuple[Any, ...],
+                                  tuple[np.ndarray, np.ndarray, np.ndarray],
+                                  np.ndarray | None] | None = None
 
     def _weight_matrix(self, L_s: np.ndarray, rows: list[int]) -> np.ndarray:
         """:func:`weight_matrix` of ``L_s[rows]``, memoised on the last bit-identical input."""
@@ -486,7 +492,7 @@ class HybridVSController:
         return cfg.K_v_active if (active and cfg.K_v_active is not None) else cfg.K_v
 
     def step(self, q: np.ndarray, qd: np.ndarray, s: np.ndarray, L_s: np.ndarray,
-             J_g: np.ndarray, G: np.ndarray, M: np.ndarray, dist: float | None = None,
+             J_g: np.ndarray, G: np.ndarray, M: np.ndarray | None, dist: float | None = None,
              grad_dist: np.ndarray | None = None, *, tau_ff: np.ndarray | None = None
              ) -> tuple[np.ndarray, dict[str, Any]]:
         """Joint torques of eq. (5) and the diagnostics to log.
@@ -498,7 +504,9 @@ class HybridVSController:
             L_s: (k, 6) interaction matrix at ``s`` (current depths).
             J_g: (6, n) camera Jacobian in ``{c}``, eq. (7).
             G: (n,) gravity torques ``G(q)`` [N m].
-            M: (n, n) inertia matrix ``M(q)`` [kg m^2] (only for ``V``).
+            M: (n, n) inertia matrix ``M(q)`` [kg m^2] (only for ``V``); None: ``V`` is
+                not computed (NaN; a caller that logs ``V`` only on some steps computes it
+                there with :func:`lyapunov` and ``diag["e_s"]``).
             dist: human-robot distance [m]; None: no human tracked.
             grad_dist: (6,) ``d(dist)/dr`` (:func:`distance_gradient`); needed when
                 ``dist < dmin``.
@@ -513,23 +521,36 @@ class HybridVSController:
         k = cfg.s_star.size
         n = cfg.K_v.shape[0]
         _vector("q", q, n)
-        s = _vector("s", s, k)
-        L_s = _matrix("L_s", L_s, (k, N_R))
+        s = np.asarray(s, dtype=float)
+        L_s = np.asarray(L_s, dtype=float)
         active = dist is not None and dist < cfg.dmin
         rows = list(cfg.avoid_rows) if (active and cfg.avoid_rows is not None) else list(
             range(k))
-        e_s = cfg.s_star[rows] - s[rows]  # eq. (1): e_s = s* - s
-        W = self._weight_matrix(L_s, rows)  # Sec. 3.1
-        e1 = primary_task(W, L_s[rows], e_s)  # eqs. (1)-(2)
+        key = (s.shape, s.tobytes(), L_s.shape, L_s.tobytes(), tuple(rows))
+        memo = self._primary_memo
+        if memo is None or memo[0] != key:  # (the features are held between camera frames)
+            s = _vector("s", s, k)
+            L_s = _matrix("L_s", L_s, (k, N_R))
+            e_s = cfg.s_star[rows] - s[rows]  # eq. (1): e_s = s* - s
+            W = self._weight_matrix(L_s, rows)  # Sec. 3.1
+            e1 = primary_task(W, L_s[rows], e_s)  # eqs. (1)-(2)
+            memo = self._primary_memo = (key, (e_s, W, e1), None)
+        e_s, W, e1 = memo[1]
         e2, de2_dr = 0.0, None
         if active:
             assert dist is not None
             if grad_dist is None:
                 raise ValueError(f"dist = {dist} m < dmin = {cfg.dmin} m needs grad_dist")
             e2, de2_dr = secondary_task(dist, grad_dist, cfg.alpha, cfg.dmin)  # eq. (17)
-        e = task_function(W, e1, de2_dr)  # eq. (3)
+            e = task_function(W, e1, de2_dr)  # eq. (3)
+        else:
+            e_memo = memo[2]
+            if e_memo is None:
+                e_memo = task_function(W, e1, None)  # eq. (3)
+                self._primary_memo = (key, memo[1], e_memo)
+            e = e_memo
         tau = hybrid_torque(cfg.k_P, J_g, e, self.damping(active), qd, G, tau_ff)  # eq. (5)
-        V = lyapunov(qd, M, e_s, cfg.k_P)  # eq. (10)
+        V = math.nan if M is None else lyapunov(qd, M, e_s, cfg.k_P)  # eq. (10)
         return tau, {"e": e, "e_s": e_s, "e1": e1, "V": V, "e2": e2, "active": active,
                      "m": W.shape[0], "rows": rows}
 

@@ -47,18 +47,31 @@ def group_minima(points: Sequence[tuple], groups: Sequence[Links]) -> list[float
     """Minimum ``contactDistance`` over the points of each group's links [m] (``inf`` where
     a group has none), from the tuples of ``pybullet.getClosestPoints`` (link of A at index
     3, distance at index 8)."""
-    near: dict[int, float] = {}  # link of A -> its closest distance [m]
+    return _minima(points, _Members(groups))
+
+
+class _Members:
+    """Which groups each link of A belongs to (the groups of one query, found once)."""
+
+    def __init__(self, groups: Sequence[Links]) -> None:
+        self.n = len(groups)
+        #: groups holding every link
+        self.every = tuple(j for j, links in enumerate(groups) if links is None)
+        self.of: dict[int, tuple[int, ...]] = {}
+        for link in {link for links in groups if links is not None for link in links}:
+            self.of[link] = tuple(j for j, links in enumerate(groups)
+                                  if links is None or link in links)
+
+
+def _minima(points: Sequence[tuple], members: _Members) -> list[float]:
+    """:func:`group_minima` with the membership found."""
+    out = [math.inf] * members.n
+    of, every = members.of, members.every
     for pt in points:
-        link, d = pt[3], pt[8]
-        if d < near.get(link, math.inf):
-            near[link] = d
-    out = []
-    for links in groups:
-        m = math.inf
-        for link, d in near.items():
-            if d < m and (links is None or link in links):
-                m = d
-        out.append(m)
+        d = pt[8]
+        for j in of.get(pt[3], every):
+            if d < out[j]:
+                out[j] = d
     return out
 
 
@@ -74,6 +87,7 @@ class ClosestPoints:
         self.client = client
         #: (body A, body B, groups) -> threshold of the next query [m]
         self._hint: dict[tuple[int, int, tuple[Links, ...]], float] = {}
+        self._members: dict[tuple[Links, ...], _Members] = {}
         self.queries = 0  # getClosestPoints calls made (for tests and benchmarks)
 
     def minima(self, body_a: int, body_b: int, groups: tuple[Links, ...], cap: float
@@ -96,5 +110,8 @@ class ClosestPoints:
     def _ask(self, body_a: int, body_b: int, groups: tuple[Links, ...], threshold: float
              ) -> list[float]:
         self.queries += 1
+        members = self._members.get(groups)
+        if members is None:
+            members = self._members[groups] = _Members(groups)
         pts = p.getClosestPoints(body_a, body_b, threshold, physicsClientId=self.client)
-        return group_minima(pts, groups)
+        return _minima(pts, members)

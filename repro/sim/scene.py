@@ -207,6 +207,10 @@ class Scene:
         self.bodies: dict[str, SceneBody] = {}
         self._others_memo: dict[tuple[int, int], list[tuple[str, list[int]]]] = {}
         self._closest = ClosestPoints(self.physics.client)
+        #: robots of a distances_of call (kept alive: their ids are the key) -> per chain:
+        #: the chain, its robots' positions in the call, their links
+        self._distance_plans: dict[tuple[int, ...], tuple[list[JointSet], list[tuple[
+            JointSet, list[int], tuple[frozenset[int] | None, ...]]]]] = {}
         #: every joint group by name (:meth:`add_joint_group`); the runner logs the groups no
         #: drive covers (positions, velocities, ground-truth distances)
         self.joint_groups: dict[str, JointGroup] = {}
@@ -471,7 +475,8 @@ class Scene:
         if not body.moving:
             raise ConfigError(f"body {name!r} was not added with moving=True")
         T_world = np.asarray(T_world, dtype=float)
-        if np.array_equal(T_world, body.T_world):
+        if T_world.tobytes() == body.T_world.tobytes() or (
+                T_world.shape == body.T_world.shape and (T_world == body.T_world).all()):
             return  # where it is: resetting a body to its own pose changes nothing
         _place(self.physics.client, body.ids, body, T_world)
         if body.render_ids:
@@ -504,14 +509,19 @@ class Scene:
         (:class:`repro.sim.closest.ClosestPoints`: the same distances, asked with a
         threshold hinted by the previous step)."""
         out: list[dict[str, float]] = [{} for _ in robots]
-        chains: dict[int, tuple[JointSet, list[int]]] = {}  # id(chain) -> chain, its robots
-        for i, robot in enumerate(robots):
-            full = getattr(robot, "robot", robot)  # a JointGroup's whole chain
-            chains.setdefault(id(full), (full, []))[1].append(i)
-        for full, idx in chains.values():
+        key = tuple(id(r) for r in robots)
+        plan = self._distance_plans.get(key)
+        if plan is None:
+            chains: dict[int, tuple[JointSet, list[int]]] = {}  # id(chain) -> its robots
+            for i, robot in enumerate(robots):
+                full = getattr(robot, "robot", robot)  # a JointGroup's whole chain
+                chains.setdefault(id(full), (full, []))[1].append(i)
             # each robot's own links (a joint group's); None: all of the chain's
-            groups = tuple(None if (links := getattr(robots[i], "links", None)) is None
-                           else frozenset(links) for i in idx)
+            plan = self._distance_plans[key] = (list(robots), [
+                (full, idx, tuple(None if (links := getattr(robots[i], "links", None)) is None
+                                  else frozenset(links) for i in idx))
+                for full, idx in chains.values()])
+        for full, idx, groups in plan[1]:
             for name, ids in self._others(full):
                 best = [max_distance] * len(idx)
                 for bid in ids:

@@ -128,23 +128,24 @@ def pose_to_pb(T: np.ndarray) -> tuple[list[float], list[float]]:
     ``Rotation.from_matrix(R).as_quat()`` gives (the same branch on the largest of the
     diagonal and the trace, then normalised), computed here directly: this runs for every
     moving body and camera at every control step."""
-    T = np.asarray(T, dtype=float)
-    R = T[:3, :3]
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    choice = int(np.argmax([R[0, 0], R[1, 1], R[2, 2], tr]))
-    q = np.empty(4)
+    (r00, r01, r02, x), (r10, r11, r12, y), (r20, r21, r22, z) = np.asarray(
+        T, dtype=float)[:3].tolist()  # Python floats: the same IEEE arithmetic, less overhead
+    tr = r00 + r11 + r22
+    diag = (r00, r11, r22, tr)
+    choice = diag.index(max(diag))  # the first largest, as np.argmax
     if choice == 3:
-        q[0], q[1], q[2] = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]
-        q[3] = 1.0 + tr
+        q = [r21 - r12, r02 - r20, r10 - r01, 1.0 + tr]
     else:
+        R = ((r00, r01, r02), (r10, r11, r12), (r20, r21, r22))
         i = choice
         j, k = (i + 1) % 3, (i + 2) % 3
-        q[i] = 1.0 - tr + 2.0 * R[i, i]
-        q[j] = R[j, i] + R[i, j]
-        q[k] = R[k, i] + R[i, k]
-        q[3] = R[k, j] - R[j, k]
-    q /= np.sqrt(q @ q)
-    return [float(T[0, 3]), float(T[1, 3]), float(T[2, 3])], [float(v) for v in q]
+        q = [0.0, 0.0, 0.0, R[k][j] - R[j][k]]
+        q[i] = 1.0 - tr + 2.0 * R[i][i]
+        q[j] = R[j][i] + R[i][j]
+        q[k] = R[k][i] + R[i][k]
+    qa = np.array(q)
+    qa /= np.sqrt(qa @ qa)  # numpy's dot, as before (its summation order is BLAS's)
+    return [x, y, z], qa.tolist()
 
 
 def pb_to_pose(pos: tuple[float, ...], quat: tuple[float, ...]) -> np.ndarray:
