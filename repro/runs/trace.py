@@ -36,7 +36,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
@@ -376,8 +376,35 @@ def _boot_id() -> str | None:
 # --------------------------------------------------------------------------- recorder
 
 
+def _bool_text(value: Any) -> str:
+    return "True" if value else "False"
+
+
+def _float_text(value: Any) -> str:
+    return repr(float(value))
+
+
+def _int_text(value: Any) -> str:
+    return str(int(value))
+
+
+def _str_text(value: Any) -> str:
+    return str(value)
+
+
+#: :func:`_format_cell` of the common exact types, found by one lookup (the isinstance
+#: chain below is the definition, and handles subclasses)
+_CELL_TEXT: dict[type, Callable[[Any], str]] = {
+    float: _float_text, np.float64: _float_text, np.float32: _float_text,
+    bool: _bool_text, np.bool_: _bool_text, int: _int_text, np.int64: _int_text,
+    np.int32: _int_text, str: _str_text}
+
+
 def _format_cell(value: Any, key: str) -> str:
     """CSV text of one trace value; floats via repr so they round-trip bit-identically."""
+    text = _CELL_TEXT.get(type(value))
+    if text is not None:
+        return text(value)
     if value is None:
         return ""
     if isinstance(value, bool | np.bool_):

@@ -50,6 +50,7 @@ proximal stays where it was and the distal closes alone, at ``motor / 93.75``.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -58,7 +59,7 @@ import numpy as np
 import pybullet as p
 
 from repro.errors import ConfigError
-from repro.sim.robot import JointLimits, JointSet, Robot
+from repro.sim.robot import _RESETS, JointLimits, JointSet, Robot
 
 __all__ = [
     "BH8_DISTAL_JOINTS", "BH8_DISTAL_LINKS", "BH8_GEOMETRY", "BH8_JOINTS", "BH8_KNUCKLE_LINKS",
@@ -590,11 +591,14 @@ class FingerDrive:
         """Motor counts of the simulated joints (:func:`finger_counts`)."""
         return finger_counts(*self.joint_positions())
 
-    def step(self, motor_target: float, h: float) -> FingerTargets:
+    def step(self, motor_target: float, h: float,
+             proximal_state: Sequence[Any] | None = None) -> FingerTargets:
         """Move the motor towards ``motor_target`` [rad] (clipped to the finger's range; a
         trapezoidal profile, :data:`MOTOR_SPEED_MAX`, :data:`MOTOR_ACCELERATION_MAX`), update
         the TorqueSwitch from the last step's proximal torque and send the joint commands
-        for the next physics step of ``h`` [s]. Returns the joint targets."""
+        for the next physics step of ``h`` [s]. ``proximal_state``: the proximal joint's
+        ``pybullet.getJointState`` of this physics step, if the caller read it already (one
+        call for the whole hand); None: read here. Returns the joint targets."""
         q_b = self.switch.q_breakaway
         top = MOTOR_ANGLE_MAX if q_b is None else DISTAL_RATIO * (q_b + self.q_max_distal)
         # scalar min/max and math.sqrt: the same IEEE results as np.clip / np.sqrt, without
@@ -612,8 +616,11 @@ class FingerDrive:
         self.motor_speed = md
         m_new = self.motor_angle + md * h
         self.motor_angle = m_new
-        q_p, _ = self.joint_positions()
-        t = self.switch.update(m_new, self.proximal_torque(), q_p)
+        if proximal_state is None:
+            proximal_state = p.getJointState(self.body, self.j_proximal,
+                                             physicsClientId=self.client)
+        q_p, tau_p = float(proximal_state[0]), float(proximal_state[3])
+        t = self.switch.update(m_new, tau_p, q_p)
         self.targets = t
         if t.engaged != self._engaged:
             set_gear_engaged(self.gear, self.client, t.engaged)
@@ -672,18 +679,27 @@ class FingerMotors(JointSet):
                                   tau_max=(BH8_LIMITS.tau_max[k_p],) * 3)
         names = {f"bh8_finger{k}_{part}" for k in FINGERS for part in ("proximal", "distal")}
         self.links = sorted(idx[n] for n in names)
+        self._joints = [j for pair in self._pairs for j in pair]
+        self._states_key: tuple[int, int] | None = None
+        self._now = (np.zeros(3), np.zeros(3))
 
-    def _states(self) -> list[tuple[Any, ...]]:
-        return list(p.getJointStates(self.body, [j for pair in self._pairs for j in pair],
-                                     physicsClientId=self.client))
+    def _states(self) -> tuple[np.ndarray, np.ndarray]:
+        """(motor angles, their rates), read once per physics step (as a Robot's joint
+        states: a step, a reset or :func:`repro.sim.robot.joint_states_changed` renews them)."""
+        key = (self.world.physics_steps, _RESETS[0])
+        if key != self._states_key:
+            s = p.getJointStates(self.body, self._joints, physicsClientId=self.client)
+            self._now = (
+                np.array([DISTAL_RATIO * (s[2 * i][0] + s[2 * i + 1][0]) for i in range(3)]),
+                np.array([DISTAL_RATIO * (s[2 * i][1] + s[2 * i + 1][1]) for i in range(3)]))
+            self._states_key = key
+        return self._now
 
     def q(self) -> np.ndarray:
-        s = self._states()
-        return np.array([DISTAL_RATIO * (s[2 * i][0] + s[2 * i + 1][0]) for i in range(3)])
+        return self._states()[0].copy()
 
     def qd(self) -> np.ndarray:
-        s = self._states()
-        return np.array([DISTAL_RATIO * (s[2 * i][1] + s[2 * i + 1][1]) for i in range(3)])
+        return self._states()[1].copy()
 
     def gravity_torques(self, q: np.ndarray) -> np.ndarray:
         return np.zeros(self.n)
@@ -710,6 +726,7 @@ class BarrettHandDrive:
                  spread: float = 0.0) -> None:
         self.robot: JointSet = motors
         self.fingers = [FingerDrive(motors.body, motors.client, k, couplings) for k in FINGERS]
+        self._proximal = [f.j_proximal for f in self.fingers]
         self.spread = float(spread)
         set_spread(motors.body, motors.client, self.spread)
         self.target = np.array([f.motor_angle for f in self.fingers])
@@ -719,8 +736,12 @@ class BarrettHandDrive:
         return self.target.copy()
 
     def substep(self, i: int, h: float) -> None:
-        for finger, m in zip(self.fingers, self.target, strict=True):
-            finger.step(float(m), h)
+        # the three proximal joints' states in one call (the motor commands sent in between
+        # change no state until the physics steps)
+        states = p.getJointStates(self.robot.body, self._proximal,
+                                  physicsClientId=self.robot.client)
+        for finger, m, st in zip(self.fingers, self.target, states, strict=True):
+            finger.step(float(m), h, st)
 
     def safe_command(self) -> np.ndarray:
         return self.target.copy()
