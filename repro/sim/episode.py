@@ -390,6 +390,46 @@ def _why_missed(in_view: bool, visible: bool, c: np.ndarray, P: np.ndarray,
         " (grazing: a flat dot's image is a sliver)" if angle > 75 else "")
 
 
+class _RunningMinima:
+    """The smallest finite value of each of a fixed list of distance columns over the steps
+    [m], and the time of the first step that reached it [s] (the manifest's
+    ``min_over_all_steps``)."""
+
+    def __init__(self, columns: list[str]) -> None:
+        self.columns = columns
+        self.best = [math.inf] * len(columns)
+        self.t = [math.nan] * len(columns)
+
+    def update(self, values: list[float], t: float) -> bool:
+        """One step's values (in the columns' order); True if one of them is <= 0."""
+        best, touch = self.best, False
+        for i, v in enumerate(values):
+            if v < best[i] and math.isfinite(v):
+                best[i], self.t[i] = float(v), t
+            if v <= 0.0:
+                touch = True
+        return touch
+
+    def merge_into(self, best_of: dict[str, tuple[float, float]]) -> None:
+        """Into ``column -> (min [m], t [s])``: the smaller, the earlier on a tie."""
+        for c, d, t in zip(self.columns, self.best, self.t, strict=True):
+            if d == math.inf:
+                continue  # never finite
+            old = best_of.get(c)
+            if old is None or d < old[0] or (d == old[0] and t < old[1]):
+                best_of[c] = (d, t)
+
+
+@dataclass
+class _DistanceColumns:
+    """A robot's distance columns for one set of other bodies (:meth:`_Runner.ground_truth`)."""
+
+    names: list[str]  # <pre>dist_<body>, in the bodies' order
+    name_min: str  # <pre>dist_min
+    obstacles: list[int]  # positions of the obstacles among the bodies
+    minima: _RunningMinima
+
+
 # ----------------------------------------------------------------------------- the loop
 class _Runner:
     def __init__(self, ep: Episode, rec: TraceRecorder, out_dir: Path) -> None:
@@ -416,9 +456,9 @@ class _Runner:
         self._observed_cols = {name: _joint_column_names(g.column_prefix, g.n)
                                for name, g in self.observed.items()}
         self.dist_min: dict[str, tuple[float, float]] = {}  # column -> (min [m], at t [s])
-        #: per (column prefix, bodies): the distance columns and which bodies are obstacles
-        self._dist_cols: dict[tuple[str, tuple[str, ...]],
-                              tuple[dict[str, str], str, dict[str, bool]]] = {}
+        #: per (column prefix, bodies): the distance columns, which bodies are obstacles and
+        #: their running minima
+        self._dist_cols: dict[tuple[str, tuple[str, ...]], _DistanceColumns] = {}
 
     def onset(self, key: str, now: bool, t: float, k: int, kind: str, detail: str,
               end_detail: str | None = None) -> None:
@@ -518,33 +558,23 @@ class _Runner:
         columns and the moving bodies' poses only into a row that is written (``row`` not
         None)."""
         scene = self.ep.scene
-        best_of = self.dist_min
-        for (name, robot), dists in zip(self._groups, scene.distances_of(self._group_sets),
-                                        strict=True):
-            cols, col_min, obstacle = self._distance_columns(robot.column_prefix, dists)
-            d_min = math.inf
-            for body, d in dists.items():
-                if d <= 0.0 and (name, body) not in self.collided:
-                    self.collided.add((name, body))
-                    # an obstacle touched is a collision; a body the robot touches on purpose
-                    # (obstacle = false: a grasped object) is a contact
-                    hit = scene[body].obstacle
-                    self.rec.summary[f"{'collided' if hit else 'touched'}_{body}"] = True
-                    self.rec.event(t, k, "collision" if hit else "contact",
-                                   f"{name} touches {body} (distance {d:.4f} m)")
-                if obstacle[body] and d < d_min:
-                    d_min = d
-                col = cols[body]
-                best = best_of.get(col)  # the smallest finite distance and its time
-                if math.isfinite(d) and (best is None or d < best[0]):
-                    best_of[col] = (float(d), t)
-            if d_min == math.inf:
-                d_min = math.nan  # no obstacle
-            self._keep_min(best_of, col_min, d_min, t)
+        for (name, robot), (bodies, dists) in zip(
+                self._groups, scene.distance_table(self._group_sets), strict=True):
+            cols = self._distance_columns(robot.column_prefix, bodies)
+            d_min = min([dists[i] for i in cols.obstacles], default=math.nan)
+            if cols.minima.update([*dists, d_min], t):  # a body touched
+                for body, di in zip(bodies, dists, strict=True):
+                    if di <= 0.0 and (name, body) not in self.collided:
+                        self.collided.add((name, body))
+                        # an obstacle touched is a collision; a body the robot touches on
+                        # purpose (obstacle = false: a grasped object) is a contact
+                        hit = scene[body].obstacle
+                        self.rec.summary[f"{'collided' if hit else 'touched'}_{body}"] = True
+                        self.rec.event(t, k, "collision" if hit else "contact",
+                                       f"{name} touches {body} (distance {di:.4f} m)")
             if row is not None:
-                for body, d in dists.items():
-                    row[cols[body]] = d
-                row[col_min] = d_min
+                row.update(zip(cols.names, dists, strict=True))
+                row[cols.name_min] = d_min
         if row is None:
             return
         for moving in scene.moving_bodies():
@@ -552,18 +582,19 @@ class _Runner:
             for c, v in zip(pose_columns(moving.name), pos + quat, strict=True):
                 row[c] = v
 
-    def _distance_columns(self, pre: str, dists: dict[str, float]
-                          ) -> tuple[dict[str, str], str, dict[str, bool]]:
-        """The distance columns of a robot (``<pre>dist_<body>``, ``<pre>dist_min``) and
-        whether each body is an obstacle (a body with no robot, marked obstacle), built
-        once per robot and set of bodies."""
-        key = (pre, tuple(dists))
+    def _distance_columns(self, pre: str, bodies: tuple[str, ...]) -> _DistanceColumns:
+        """The distance columns of a robot (``<pre>dist_<body>``, ``<pre>dist_min``), which
+        bodies are obstacles (a body with no robot, marked obstacle) and their running
+        minima, made once per robot and set of bodies."""
+        key = (pre, bodies)
         got = self._dist_cols.get(key)
         if got is None:
             scene = self.ep.scene
-            cols = {body: f"{pre}dist_{body}" for body in dists}
-            obstacle = {b: scene[b].robot is None and scene[b].obstacle for b in dists}
-            got = self._dist_cols[key] = (cols, f"{pre}dist_min", obstacle)
+            names = [f"{pre}dist_{body}" for body in bodies]
+            obstacles = [i for i, b in enumerate(bodies)
+                         if scene[b].robot is None and scene[b].obstacle]
+            got = self._dist_cols[key] = _DistanceColumns(
+                names, f"{pre}dist_min", obstacles, _RunningMinima([*names, f"{pre}dist_min"]))
         return got
 
     @staticmethod
@@ -745,6 +776,8 @@ class _Runner:
                             "stop_reason": reason})
         rec.summary["audit"] = {name: a.summary() for name, a in self.audit.items()}
         rec.summary["log_every"] = ep.log_every
+        for cols in self._dist_cols.values():
+            cols.minima.merge_into(self.dist_min)
         rec.summary["min_over_all_steps"] = {
             c: {"min_m": d, "t_s": tt} for c, (d, tt) in sorted(self.dist_min.items())}
         return status, reason

@@ -508,7 +508,13 @@ class Scene:
         hand of one chain) share each query and keep the points on their own links
         (:class:`repro.sim.closest.ClosestPoints`: the same distances, asked with a
         threshold hinted by the previous step)."""
-        out: list[dict[str, float]] = [{} for _ in robots]
+        return [dict(zip(names, values, strict=True))
+                for names, values in self.distance_table(robots, max_distance)]
+
+    def distance_table(self, robots: Sequence[JointSet], max_distance: float = DISTANCE_CAP
+                       ) -> list[tuple[tuple[str, ...], list[float]]]:
+        """:meth:`distances_of` as, per robot, the other bodies' names and the distances [m]
+        in that order (the runner's every-step form: no dictionaries)."""
         key = tuple(id(r) for r in robots)
         plan = self._distance_plans.get(key)
         if plan is None:
@@ -521,16 +527,25 @@ class Scene:
                 (full, idx, tuple(None if (links := getattr(robots[i], "links", None)) is None
                                   else frozenset(links) for i in idx))
                 for full, idx in chains.values()])
+        out: list[tuple[tuple[str, ...], list[float]]] = [((), [])] * len(robots)
+        minima = self._closest.minima
         for full, idx, groups in plan[1]:
-            for name, ids in self._others(full):
-                best = [max_distance] * len(idx)
-                for bid in ids:
-                    for j, d in enumerate(self._closest.minima(full.body, bid, groups,
-                                                                max_distance)):
-                        if d < best[j]:
-                            best[j] = d
-                for j, i in enumerate(idx):
-                    out[i][name] = float(best[j])
+            others = self._others(full)
+            names = tuple(name for name, _ in others)
+            values: list[list[float]] = [[] for _ in idx]
+            for _, ids in others:
+                if len(ids) == 1:
+                    best = minima(full.body, ids[0], groups, max_distance)
+                else:  # a compound body: the minimum over its parts
+                    best = [max_distance] * len(idx)
+                    for bid in ids:
+                        for j, d in enumerate(minima(full.body, bid, groups, max_distance)):
+                            if d < best[j]:
+                                best[j] = d
+                for vals, d in zip(values, best, strict=True):
+                    vals.append(float(d))
+            for i, vals in zip(idx, values, strict=True):
+                out[i] = (names, vals)
         return out
 
     def _others(self, full: JointSet) -> list[tuple[str, list[int]]]:
