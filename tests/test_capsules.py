@@ -15,6 +15,7 @@ from repro.errors import ConfigError, UnknownChoiceError
 from repro.planning.capsules import (
     METHODS,
     Capsule,
+    _fcl_signed_distance,
     capsule_closest_points,
     capsule_distance,
     min_distance,
@@ -227,3 +228,28 @@ def test_T_world_is_the_z_axis_capsule_pose(axis: tuple[float, float, float]) ->
     M[:3, 3] = rng.normal(size=3)
     assert capsule_distance(c.transformed(M), other.transformed(M)) == pytest.approx(
         capsule_distance(c, other), abs=1e-12)
+
+
+def _fcl_every_pair(set_a: list[Capsule], set_b: list[Capsule]) -> tuple[float, int, int]:
+    """The definition: fcl on every pair, the first minimum in row-major order."""
+    best = (np.inf, -1, -1)
+    for i, a in enumerate(set_a):
+        for j, b in enumerate(set_b):
+            d = _fcl_signed_distance(a.fcl_object(), b.fcl_object())
+            if d < best[0]:
+                best = (d, i, j)
+    return best
+
+
+@pytest.mark.parametrize("spread", [0.05, 0.5, 3.0])  # overlapping, near, far apart
+def test_fcl_min_distance_skips_only_pairs_that_cannot_win(spread: float) -> None:
+    """min_distance(method="fcl") skips pairs by their bounding spheres: the same distance
+    and the same (first) pair as fcl on every pair, to the bit, ties included."""
+    rng = np.random.default_rng(11)
+    for _ in range(40):
+        set_a = [Capsule(*(rng.normal(0.0, spread, 3) for _ in range(2)), rng.uniform(0, 0.05))
+                 for _ in range(4)]
+        set_b = [Capsule(*(rng.normal(0.3, spread, 3) for _ in range(2)), rng.uniform(0, 0.1))
+                 for _ in range(12)]
+        set_b.append(set_b[3])  # an exact tie: the first of the two pairs wins
+        assert min_distance(set_a, set_b, "fcl") == _fcl_every_pair(set_a, set_b)
