@@ -94,11 +94,15 @@ class Capsule:
         """4x4 pose of a z-axis capsule of length :attr:`length` centred at the midpoint,
         its z axis along ``p1 - p0`` (any rotation for a point-like capsule): the pose for
         ``Scene.add_capsule(name, radius, length, T_world, ...)`` and ``Scene.move``, and
-        the frame of ``fcl.Capsule(radius, length)``."""
-        T = np.eye(4)
-        T[:3, :3] = rotation_z_to(self.p1 - self.p0)
-        T[:3, 3] = self.centre
-        return T
+        the frame of ``fcl.Capsule(radius, length)``. Found once per capsule (it is
+        immutable: a moving person's body pose and its tracker share it); a copy."""
+        T = self.__dict__.get("_T_world")
+        if T is None:
+            T = np.eye(4)
+            T[:3, :3] = rotation_z_to(self.p1 - self.p0)
+            T[:3, 3] = self.centre
+            object.__setattr__(self, "_T_world", T)
+        return T.copy()
 
     def transformed(self, T_a_b: np.ndarray) -> Capsule:
         """The same capsule with its end points mapped from frame b to frame a."""
@@ -264,20 +268,31 @@ def min_distance(set_a: Sequence[Capsule], set_b: Sequence[Capsule],
         # found by more than PRUNE_MARGIN is farther. The first such distance is the pair
         # with the smallest gap; then every pair is visited in row-major order as before
         # (the same minimum, the same first pair on ties).
-        objs_b = [_fcl_object_of(b) for b in set_b]
+        objs_b: list[fcl.CollisionObject | None] = [None] * len(set_b)  # made when needed
+
+        def obj_b(j: int) -> fcl.CollisionObject:
+            ob = objs_b[j]
+            if ob is None:
+                ob = objs_b[j] = _fcl_object_of(set_b[j])
+            return ob
+
         spheres_b = [_bounding_sphere(b) for b in set_b]
         gaps = [[math.dist(ca, cb) - ra - rb for cb, rb in spheres_b]
                 for ca, ra in (_bounding_sphere(a) for a in set_a)]
         i0, j0 = min(((i, j) for i in range(len(set_a)) for j in range(len(set_b))),
                      key=lambda ij: gaps[ij[0]][ij[1]])
-        d0 = _fcl_signed_distance(_fcl_object_of(set_a[i0]), objs_b[j0])
+        d0 = _fcl_signed_distance(_fcl_object_of(set_a[i0]), obj_b(j0))
         bound = d0 + PRUNE_MARGIN
         for i, a in enumerate(set_a):
-            oa = _fcl_object_of(a)
-            for j, ob in enumerate(objs_b):
+            oa = None
+            for j in range(len(set_b)):
                 if gaps[i][j] > bound:
                     continue  # farther than (i0, j0): not the minimum
-                d = d0 if (i, j) == (i0, j0) else _fcl_signed_distance(oa, ob)
+                if (i, j) == (i0, j0):
+                    d = d0
+                else:
+                    oa = _fcl_object_of(a) if oa is None else oa
+                    d = _fcl_signed_distance(oa, obj_b(j))
                 if d < best[0]:
                     best = (d, i, j)
                     bound = min(bound, d + PRUNE_MARGIN)
