@@ -141,8 +141,10 @@ def project_normalized(points_obj: np.ndarray,
     T = np.asarray(T_cam_obj, dtype=float)
     P_c = P @ T[:3, :3].T + T[:3, 3]
     Z = P_c[:, 2].copy()
-    xy = np.full((P.shape[0], 2), np.nan)
     ok = Z > 0.0
+    if ok.all():  # (every point in front: no masking, the same quotients)
+        return P_c[:, :2] / Z[:, None], Z
+    xy = np.full((P.shape[0], 2), np.nan)
     xy[ok] = P_c[ok, :2] / Z[ok, None]
     return xy, Z
 
