@@ -43,6 +43,8 @@ from repro.vision.ibvs import feature_jacobian
 from repro.vision.pose import point_depths
 
 RING_NAMES = ("ring1", "ring2")
+#: the link the camera is fixed to: eJ_e of eq. (7) is its Jacobian
+CAMERA_LINK = sc.CAMERA_PARENT[0]
 HAND_RGBA = (0.9, 0.75, 0.65, 1.0)  # ours: skin
 
 
@@ -143,21 +145,45 @@ class Thomas2024Controller:
                 L = ring_interaction_matrix(self.dirs[k], np.zeros(ring.spec.n_sensors),
                                             ring.spec.radius, "coarse")
             self._ring_L.append(L)
+        # Per ring: the link its frame S_j is fixed to, and jV_Nj (eq. (9)).
+        self._ring_links = [sc.RING_PARENTS[r.spec.name][0] for r in rings]
+        self._ring_Vs = [self.ring_V[r.spec.name] for r in rings]
+        #: the links whose Jacobian a step needs, each asked of pinocchio once per step (the
+        #: flange carries both ring 2 and the camera)
+        self._jac_links = tuple(dict.fromkeys([*(self._ring_links if config.proximity else []),
+                                               CAMERA_LINK]))
+        # Pixels -> normalised coordinates (Intrinsics.to_normalized): with no skew it is
+        # (u - u0) / fu, (v - v0) / fv, one broadcast operation instead of its five (its
+        # "- skew y" subtracts a zero, which changes no bit: tests/test_thomas2024_speed.py).
+        # None: a skewed camera, use to_normalized itself.
+        K = sc.INTRINSICS
+        self._px_offset: np.ndarray | None = None
+        self._px_scale: np.ndarray | None = None
+        if K.skew == 0.0:
+            self._px_offset, self._px_scale = np.array([K.u0, K.v0]), np.array([K.fu, K.fv])
         self.prev_status = "solved"
+
+    def normalized(self, uv: np.ndarray) -> np.ndarray:
+        """Pixel coordinates (N, 2) [px] -> normalised coordinates (N, 2) [-], bit for bit
+        ``sc.INTRINSICS.to_normalized(uv)``."""
+        if self._px_offset is None or self._px_scale is None:
+            return sc.INTRINSICS.to_normalized(uv)
+        return (np.asarray(uv, dtype=float) - self._px_offset) / self._px_scale
 
     def step(self, q: np.ndarray, uv: np.ndarray, found: np.ndarray, Z_exact: np.ndarray,
              readings: list[RingReading]) -> StepOutput:
         """One control step: thomas2024 eqs. (7)-(10)."""
         cfg, n, m = self.config, self.n, self.m
-        if not np.asarray(found).all():
+        if np.count_nonzero(found) != np.size(found):  # a dot lost
             return StepOutput(np.zeros(n), "no_features", np.full(8, np.nan), np.zeros(m),
                               float("nan"), 0, 0.0, 0.0, "")
-        x = sc.INTRINSICS.to_normalized(uv)
+        x = self.normalized(uv)
         e_4p = (x - self.s_star).ravel()
-        A, b = np.empty((m, n)), np.empty(m)
+        # eJ_e of eq. (7) and J_Nj of eq. (9), one pinocchio call per link
+        J = {link: self.robot.frame_jacobian(link, q) for link in self._jac_links}
         used: list[np.ndarray | None] = [None] * len(self.rings)
         if cfg.proximity:
-            row = 0
+            rows: list[Inequalities] = []
             for k, (ring, reading) in enumerate(zip(self.rings, readings, strict=True)):
                 L = self._ring_L[k]
                 if L is None:
@@ -166,22 +192,24 @@ class Thomas2024Controller:
                     used[k] = normals
                     L = ring_interaction_matrix(self.dirs[k], reading.delta, ring.spec.radius,
                                                 cfg.ring_models[k], normals)
-                link = sc.RING_PARENTS[ring.spec.name][0]
-                J_S = self.ring_V[ring.spec.name] @ self.robot.frame_jacobian(link, q)  # (9)
-                ineq = cbf_inequalities(L, J_S, reading.delta, cfg.thresholds[k],
-                                        cfg.ring_gains[k])
-                A[row:row + len(ineq.b)], b[row:row + len(ineq.b)] = ineq.A, ineq.b
-                row += len(ineq.b)
+                J_S = self._ring_Vs[k].dot(J[self._ring_links[k]])  # (9): jV_Nj J_Nj
+                rows.append(cbf_inequalities(L, J_S, reading.delta, cfg.thresholds[k],
+                                             cfg.ring_gains[k]))
+            ineq = Inequalities(np.concatenate([r.A for r in rows]),
+                                np.concatenate([r.b for r in rows]))
+        else:
+            ineq = Inequalities(np.empty((0, n)), np.empty(0))
         # Depths for L_x: PnP pose of the detected dots (render), exact geometry otherwise.
         Z = Z_exact if cfg.camera_mode == "exact" else point_depths(
             self.target_points, uv, sc.INTRINSICS.K(), self.Z_star)
         J_4p = feature_jacobian(interaction_matrix_points(x, Z), self.cV_e,
-                                self.robot.frame_jacobian("panda_link8", q))  # eq. (7)
-        res = self.qp.step(ibvs_objective(J_4p, e_4p, cfg.lambda_4p, cfg.mu), Inequalities(A, b),
-                           self.qd_max)
+                                J[CAMERA_LINK])  # eq. (7)
+        res = self.qp.step(ibvs_objective(J_4p, e_4p, cfg.lambda_4p, cfg.mu), ineq, self.qd_max)
+        # (the slack is all zeros when the hard QP is solved)
+        max_slack = float(res.slack.max()) if m and res.status != "solved" else 0.0
         return StepOutput(res.u, res.status, e_4p, res.kappa, res.grad_L0,
-                          res.iterations, res.solve_time_s,
-                          float(res.slack.max()) if m else 0.0, res.qp_status, tuple(used))
+                          res.iterations, res.solve_time_s, max_slack, res.qp_status,
+                          tuple(used))
 
     def normal_columns(self, out: StepOutput, readings: list[RingReading]
                        ) -> dict[str, float | int]:

@@ -52,9 +52,11 @@ def ibvs_objective(J_4p: np.ndarray, e_4p: np.ndarray, lambda_4p: float, mu: flo
         mu: regularisation (thomas2024: 0.01).
     """
     n = J_4p.shape[1]
-    G = J_4p.T @ J_4p
+    # (ndarray.dot: the BLAS calls of @ -- syrk for J^T J, gemv --, without the matmul
+    # ufunc's overhead on these small arrays; the same bits)
+    G = J_4p.T.dot(J_4p)
     G.flat[:: n + 1] += mu  # + mu I (adding 0 off the diagonal changes nothing)
-    return Objective(G, lambda_4p * J_4p.T @ e_4p)
+    return Objective(G, (lambda_4p * J_4p.T).dot(e_4p))
 
 
 def cbf_inequalities(L_delta: np.ndarray, J_S: np.ndarray, delta: np.ndarray,
@@ -69,7 +71,7 @@ def cbf_inequalities(L_delta: np.ndarray, J_S: np.ndarray, delta: np.ndarray,
         delta_star: threshold distance delta* [m].
         gain: lambda_j [1/s] of the class-K function alpha(e) = lambda_j e.
     """
-    return Inequalities(L_delta @ J_S, -gain * (delta - delta_star))
+    return Inequalities(L_delta.dot(J_S), -gain * (delta - delta_star))  # .dot: @ for 2-D
 
 
 @dataclass(frozen=True)
@@ -176,6 +178,8 @@ class CBFQPController:
         self.slack_weight = slack_weight
         self._u_inf = np.full(m, np.inf)
         self._u_inf.flags.writeable = False
+        self._no_slack = np.zeros(m)  # the slack of a solved hard QP (read-only, shared)
+        self._no_slack.flags.writeable = False
 
     def step(self, objective: Objective, ineq: Inequalities, qd_max: np.ndarray) -> CBFQPResult:
         """Solve eq. (10) with box bounds -qd_max <= u <= qd_max [rad/s]."""
@@ -185,11 +189,11 @@ class CBFQPController:
             lb=-qd_max, ub=qd_max,
         )
         sol = self.hard.solve(problem)
-        if sol.status == "solved" and np.isfinite(sol.x).all():
+        if sol.status == "solved":  # (QPSolver: a "solved" x, z, z_box are finite)
             kappa = lower_multipliers(sol)
-            r = objective.g - ineq.A.T @ kappa
-            grad_L0 = math.sqrt(r @ r)  # eq. (14), u = 0; = np.linalg.norm(r)
-            return CBFQPResult(sol.x, "solved", sol.status, kappa, grad_L0, np.zeros(m), sol)
+            r = objective.g - ineq.A.T.dot(kappa)
+            grad_L0 = math.sqrt(r.dot(r))  # eq. (14), u = 0; = np.linalg.norm(r)
+            return CBFQPResult(sol.x, "solved", sol.status, kappa, grad_L0, self._no_slack, sol)
         if self.relaxed is not None:
             H = np.zeros((n + m, n + m))
             H[:n, :n] = objective.H

@@ -44,8 +44,9 @@ def L_delta_coarse(n_S: np.ndarray) -> np.ndarray:
     return np.concatenate([-n_S, np.zeros(3)])
 
 
-_YZX = np.array([1, 2, 0])
-_ZXY = np.array([2, 0, 1])
+#: columns (y, z, x) then (z, x, y) of a 3-vector: a x b = a_yzx b_zxy - a_zxy b_yzx
+_YZX_ZXY = np.array([1, 2, 0, 2, 0, 1])
+_ZXY_YZX = np.array([2, 0, 1, 1, 2, 0])
 
 
 def ring_interaction_matrix(
@@ -74,15 +75,17 @@ def ring_interaction_matrix(
     L[:, :3] = -n_S  # eq. (6)
     if model == "coarse" or normals is None:
         return L
-    ok = np.isfinite(normals).all(axis=1)
-    if not ok.any():
+    ok = np.logical_and.reduce(np.isfinite(normals), axis=1).nonzero()[0]
+    if not ok.size:
         return L
     n_T = normals[ok]
-    m_T = (delta[ok] + r)[:, None] * n_S[ok]
-    rows = np.empty((n_T.shape[0], 6))  # eq. (5): [n_T, m_T x n_T]
+    rows = np.empty((ok.size, 6))  # eq. (5): [n_T, m_T x n_T]
     rows[:, :3] = n_T
-    # m_T x n_T with the products and differences of np.cross, without its overhead.
-    rows[:, 3:] = m_T[:, _YZX] * n_T[:, _ZXY] - m_T[:, _ZXY] * n_T[:, _YZX]
+    # m_T x n_T = m_T,yzx n_T,zxy - m_T,zxy n_T,yzx: the products and differences of np.cross,
+    # without its overhead; m_T = (delta + r) n_S is formed in both column orders at once
+    m_T = (delta[ok] + r)[:, None] * n_S[ok[:, None], _YZX_ZXY]  # (s, 6): yzx | zxy
+    n_T6 = n_T[:, _ZXY_YZX]  # zxy | yzx
+    np.subtract(m_T[:, :3] * n_T6[:, :3], m_T[:, 3:] * n_T6[:, 3:], out=rows[:, 3:])
     if model == "exact":
         rows *= (-1.0 / np.einsum("ij,ij->i", n_T, n_S[ok]))[:, None]  # beta, eq. (2)
     L[ok] = rows
@@ -185,6 +188,9 @@ class NormalEstimator:
         self.cond = np.full(m, np.nan)
         self.spread = np.full(m, np.nan)
         self.source = np.zeros(m, dtype=int)
+        k = self.config.neighbours
+        #: the sensors whose points join sensor i's fit, i-k..i+k (mod m), in column i: (w, m)
+        self._neighbours = (np.arange(-k, k + 1)[:, None] + np.arange(m)) % m
 
     @property
     def T_world_ring(self) -> np.ndarray | None:
@@ -216,16 +222,27 @@ class NormalEstimator:
         (tp_T_tq = T_now^-1 T_then); past points closer than ``min_separation`` to the
         current detection are dropped (thomas2024 Sec. II-A1), so are points farther
         than ``max_separation`` (another object). Vectorised over sensors.
+
+        Eq. (4) is solved (B^-1 b, with the pseudo-inverse) only for the sensors whose fit
+        is well posed -- at least two points, least extent above the degeneracy threshold --
+        which the eigenvalues of B decide first: the others keep their held normal or none
+        whatever B^-1 b is (in case 2, ring 2 has no such sensor in four steps out of five).
+        The pseudo-inverse is one LAPACK SVD per matrix, the same bits for a subset of the
+        stack; every other array keeps its shape for all detected sensors. The estimates
+        are those of the previous, einsum-based code to the bit
+        (tests/test_thomas2024_speed.py).
         """
         m = self.n_S.shape[0]
         out = np.full((m, 3), np.nan)
-        self.cond[:], self.spread[:], self.source[:] = np.nan, np.nan, SOURCE_NONE
+        self.cond.fill(np.nan)
+        self.spread.fill(np.nan)
+        self.source.fill(SOURCE_NONE)
         if self._current is None:
             return out
         cfg = self.config
         T_now, pts_now, det_now = self._current
         self._held[~det_now] = np.nan  # a sensor that lost its obstacle forgets its normal
-        if not np.any(det_now):
+        if not det_now.any():
             return out
         T_now_inv = np.linalg.inv(T_now)
         if self._past is None:
@@ -236,39 +253,51 @@ class NormalEstimator:
             p_rel = p_then @ T_rel[:, :3, :3].transpose(0, 2, 1) + T_rel[:, None, :3, 3]
             P = np.concatenate((pts_now[None], p_rel))  # (K, m, 3), K = 1 + history; 0 = now
             D = np.concatenate((det_now[None], d_then))  # (K, m)
-        sensors = np.flatnonzero(det_now)
-        offsets = np.arange(-cfg.neighbours, cfg.neighbours + 1)
-        nbr = (sensors[:, None] + offsets[None, :]) % m  # (s, w)
-        cand = P[:, nbr]  # (K, s, w, 3)
-        valid = D[:, nbr]  # (K, s, w)
-        p_i = pts_now[sensors]  # (s, 3)
-        diff = cand - p_i[None, :, None, :]
+        sensors = det_now.nonzero()[0]
+        nbr = self._neighbours[:, sensors]  # (w, s)
+        cand = P[:, nbr].transpose(1, 0, 2, 3).copy()  # (w, K, s, 3): neighbour, time, sensor
+        diff = cand - pts_now[sensors]
         dist = np.sqrt(np.add.reduce(diff * diff, axis=-1))  # = np.linalg.norm(diff, axis=-1)
-        keep = valid & (dist <= cfg.max_separation)
-        keep[1:] &= dist[1:] >= cfg.min_separation  # past points near the current one dropped
-        w = keep.astype(float)
-        B = np.einsum("ksw,kswa,kswb->sab", w, cand, cand)  # eq. (4): sum p p^T
-        b = np.einsum("ksw,kswa->sa", w, cand)  # sum p
-        count = w.sum(axis=(0, 2))
-        n_plane = np.einsum("sab,sb->sa", np.linalg.pinv(B, rcond=1e-6), b)
-        norm = np.linalg.norm(n_plane, axis=1)
+        keep = D[:, nbr].transpose(1, 0, 2) & (dist <= cfg.max_separation)  # (w, K, s)
+        keep[:, 1:] &= dist[:, 1:] >= cfg.min_separation  # past points near now: dropped
+        # eq. (4): B = sum p p^T and b = sum p over each sensor's kept points (weights w = 0
+        # or 1), summed from 0 one term at a time, neighbour by neighbour and in time within
+        # each: np.add.reduce along the first axis of the (w K, s, ...) stack. That is the
+        # order, hence the bits, in which np.einsum("ksw,kswa,kswb->sab", w, cand, cand) and
+        # np.einsum("ksw,kswa->sa", w, cand) sum the (K, s, w) arrays of P[:, nbr] (laid out
+        # s, w, K in memory by advanced indexing, einsum runs over K innermost), without
+        # einsum's generic loop.
+        W, K, S = keep.shape
+        wp = keep[..., None] * cand  # w p: p or 0
+        B = np.add.reduce((wp[..., :, None] * cand[..., None, :]).reshape(W * K, S, 3, 3),
+                          axis=0, initial=0.0)
+        b = np.add.reduce(wp.reshape(W * K, S, 3), axis=0, initial=0.0)
+        count = np.add.reduce(keep.reshape(W * K, S), axis=0, dtype=float)
         eig = np.linalg.eigvalsh(B)  # ascending, per sensor
         with np.errstate(divide="ignore", invalid="ignore"):
             # capped at 1e16 (double precision): a singular B has eig[:, 0] <= 0
             self.cond[sensors] = eig[:, -1] / np.maximum(eig[:, 0], 1e-16 * eig[:, -1])
             spread = np.sqrt(np.maximum(eig[:, 0], 0.0) / count)
         self.spread[sensors] = spread
-        posed = spread >= cfg.min_spread  # NaN (count 0) is not
-        good = (count >= 2) & np.isfinite(norm) & (norm > 1e-12) & posed
-        n_T = -n_plane / np.where(good, norm, 1.0)[:, None]  # n_T faces the sensor
-        facing = np.einsum("sa,sa->s", n_T, self.n_S[sensors]) <= -cfg.min_facing
-        good &= facing
-        out[sensors[good]] = n_T[good]
-        self.source[sensors[good]] = SOURCE_FIT
+        posed = (count >= 2) & (spread >= cfg.min_spread)  # NaN (count 0) is not
         R = T_now[:3, :3]
-        self._held[sensors[good]] = n_T[good] @ R.T
+        if posed.any():
+            B_inv = np.zeros_like(B)  # eq. (4)'s B^-1 (pseudo-inverse) where the fit is posed
+            B_inv[posed] = np.linalg.pinv(B[posed], rcond=1e-6)
+            n_plane = np.einsum("sab,sb->sa", B_inv, b)
+            norm = np.linalg.norm(n_plane, axis=1)
+            good = posed & np.isfinite(norm) & (norm > 1e-12)
+            n_T = -n_plane / np.where(good, norm, 1.0)[:, None]  # n_T faces the sensor
+            facing = np.einsum("sa,sa->s", n_T, self.n_S[sensors]) <= -cfg.min_facing
+            good &= facing
+            out[sensors[good]] = n_T[good]
+            self.source[sensors[good]] = SOURCE_FIT
+            self._held[sensors[good]] = n_T[good] @ R.T
+        else:
+            good = posed  # all False
         # a degenerate fit keeps the sensor's last well-posed normal (world-fixed)
         hold = sensors[~good & ~np.isnan(self._held[sensors, 0])]
-        out[hold] = self._held[hold] @ R
-        self.source[hold] = SOURCE_HELD
+        if hold.size:
+            out[hold] = self._held[hold] @ R
+            self.source[hold] = SOURCE_HELD
         return out

@@ -34,7 +34,8 @@ the upper bound :math:`u_i` is active and :math:`z_i = 0` on inactive rows (same
 the Lagrangian :math:`L = \tfrac12 x^\top H x + g^\top x - \sum_k \kappa_k (a_k^\top x - b_k)`,
 :math:`\kappa_k \ge 0`; hence :math:`\kappa = \max(-z, 0)`, see :func:`lower_multipliers`.
 
-Statuses: ``"solved"`` (converged *and* the KKT residuals recomputed here are small),
+Statuses: ``"solved"`` (converged *and* the KKT residuals recomputed here are small --
+or, for the exact active-set backends DAQP and quadprog, certified by their exit),
 ``"infeasible"`` (primal or dual infeasibility certified, or ``l > u``, ``l = +inf``,
 ``u = -inf``), ``"max_iter"``
 (iteration budget spent), ``"failed"`` (anything else, including a backend that claims
@@ -77,8 +78,9 @@ Backends are imported lazily, so importing this module costs only NumPy.
 
 from __future__ import annotations
 
+import math
 import time
-from typing import Any, Literal, NamedTuple, Protocol
+from typing import Any, Literal, NamedTuple, Protocol, TypeGuard
 
 import numpy as np
 
@@ -139,8 +141,11 @@ class QPSolution(NamedTuple):
         solve_time_s: wall time of the whole :meth:`QPSolver.solve` call [s], including
             data transfer to the backend, both attempts and the KKT check.
         primal_residual: max bound violation of ``C x`` and ``x``, recomputed here on the
-            unscaled problem (infinity norm).
-        dual_residual: infinity norm of ``H x + g + C^T z + z_box``, recomputed here.
+            unscaled problem (infinity norm); NaN for a "solved" of DAQP or quadprog,
+            accepted on the active-set method's certificate without recomputing it (see
+            :meth:`QPSolver.solve`; :func:`kkt_residuals` computes it).
+        dual_residual: infinity norm of ``H x + g + C^T z + z_box``, recomputed here (NaN
+            as ``primal_residual``).
         inner_iterations: proxsuite: Newton steps of that attempt (``info.iter``), at most
             ``max_iter * (max_iter_in + 1)``; quadprog: ``iterations`` plus the rows dropped
             from the active set; OSQP, DAQP: equal to ``iterations``.
@@ -166,9 +171,10 @@ class QPSolution(NamedTuple):
 class _Dense(NamedTuple):
     """A QPProblem with every optional part filled in (infinite bounds kept as inf).
 
-    ``bounds`` stacks the bounds of ``v = [C x; x]`` as ``[l; lb; u; ub]`` (so ``bounds[:k]``
-    are the lower and ``bounds[k:]`` the upper bounds of ``v``, ``k = m + n``) and
-    ``not_finite`` marks its non-finite entries; both serve the KKT check (:func:`_kkt_full`).
+    ``bounds`` stacks the bounds of ``v = [x; C x]`` as ``[lb; l; ub; u]`` (so ``bounds[:k]``
+    are the lower and ``bounds[k:]`` the upper bounds of ``v``, ``k = n + m``: DAQP's order,
+    which it is given as views); it serves the checks of :meth:`QPSolver.solve` and the KKT
+    check (:func:`_kkt_full`).
     """
 
     H: np.ndarray
@@ -179,7 +185,6 @@ class _Dense(NamedTuple):
     lb: np.ndarray
     ub: np.ndarray
     bounds: np.ndarray
-    not_finite: np.ndarray | None  # None when every bound is finite
 
 
 class _RawResult(NamedTuple):
@@ -191,6 +196,14 @@ class _RawResult(NamedTuple):
     status: QPStatus
     iterations: int  # proxsuite: outer; OSQP: ADMM; DAQP, quadprog: active-set iterations
     inner_iterations: int  # proxsuite: Newton steps; quadprog: + dropped rows; else = iterations
+
+
+_F64 = np.dtype(float)
+
+
+def _is_f64(a: Any, shape: tuple[int, ...]) -> TypeGuard[np.ndarray]:
+    """``a`` is already a float64 ndarray of ``shape`` (nothing to convert or reshape)."""
+    return type(a) is np.ndarray and a.dtype == _F64 and a.shape == shape
 
 
 def _vec(v: np.ndarray | None, size: int, fill: float, name: str) -> np.ndarray:
@@ -209,11 +222,15 @@ def _as_dense(problem: QPProblem, n: int | None = None, m: int | None = None) ->
         QPDimensionError: when a shape disagrees with ``n`` / ``m`` (inferred from ``H``
             and ``C`` when not given).
     """
-    H = np.asarray(problem.H, dtype=float)
+    H = problem.H  # (np.asarray(., dtype=float) only where it would make a new array)
+    if type(H) is not np.ndarray or H.dtype != _F64:
+        H = np.asarray(H, dtype=float)
     if H.ndim == 2 and H.shape[0] == H.shape[1]:
         H = H + H.T  # OSQP reads only the upper triangle, proxsuite all of H
         H *= 0.5
-    g = np.asarray(problem.g, dtype=float).reshape(-1)
+    g = problem.g
+    if type(g) is not np.ndarray or g.dtype != _F64 or g.ndim != 1:
+        g = np.asarray(g, dtype=float).reshape(-1)
     if n is None:
         n = H.shape[0] if H.ndim == 2 else -1
     if H.shape != (n, n):
@@ -223,20 +240,25 @@ def _as_dense(problem: QPProblem, n: int | None = None, m: int | None = None) ->
     if problem.C is None:
         C = np.zeros((0, n))
     else:
-        C = np.asarray(problem.C, dtype=float)
+        C = problem.C
+        if type(C) is not np.ndarray or C.dtype != _F64:
+            C = np.asarray(C, dtype=float)
         if C.ndim == 1 and C.size == n:
             C = C.reshape(1, n)
     if m is None:
         m = C.shape[0]
     if C.shape != (m, n):
         raise QPDimensionError(f"C has shape {C.shape}, expected ({m}, {n})")
-    l = _vec(problem.l, m, -np.inf, "l")
-    u = _vec(problem.u, m, np.inf, "u")
-    lb = _vec(problem.lb, n, -np.inf, "lb")
-    ub = _vec(problem.ub, n, np.inf, "ub")
-    bounds = np.concatenate((l, lb, u, ub))
-    finite = np.isfinite(bounds)
-    return _Dense(H, g, C, l, u, lb, ub, bounds, None if finite.all() else ~finite)
+    l, u, lb, ub = problem.l, problem.u, problem.lb, problem.ub  # float (size,): as they are
+    if not _is_f64(l, (m,)):
+        l = _vec(l, m, -np.inf, "l")
+    if not _is_f64(u, (m,)):
+        u = _vec(u, m, np.inf, "u")
+    if not _is_f64(lb, (n,)):
+        lb = _vec(lb, n, -np.inf, "lb")
+    if not _is_f64(ub, (n,)):
+        ub = _vec(ub, n, np.inf, "ub")
+    return _Dense(H, g, C, l, u, lb, ub, np.concatenate((lb, l, ub, u)))
 
 
 class _KKT(NamedTuple):
@@ -255,50 +277,72 @@ class _KKT(NamedTuple):
                 "complementarity": self.complementarity, "dual_sign": self.dual_sign}
 
 
-def _kkt_full(d: _Dense, x: np.ndarray, z: np.ndarray, z_box: np.ndarray) -> _KKT:
+class _KKTWork:
+    """The buffers of :func:`_kkt_full` for one problem size (n variables, m rows), made once
+    per :class:`QPSolver`: the same arithmetic as fresh arrays, without allocating or slicing
+    them on every solve. Each row of ``W`` is written on the same slice every call, so its
+    zero padding stays zero."""
+
+    def __init__(self, n: int, m: int) -> None:
+        k = m + n
+        self.n, self.m = n, m
+        self.W = W = np.zeros((6, max(2 * k, 4 * n)))
+        self.stat = W[0, :n]  # |H x + g + C^T z + z_box|
+        self.E = W[1, :2 * k]  # [lo - v; v - hi]
+        self.E_lo = self.E[:k]
+        self.compl = W[2, :2 * k]  # Y |E| (|E| = 0 on infinite bounds)
+        self.dual_sign = W[3, :2 * k]  # Y [bound infinite]
+        self.S = W[4, :4 * n]  # |[H x; g; C^T z; z_box]|
+        self.v_abs = W[5, :k]  # |v|
+        self.vv = np.empty(2 * k)  # [v; v], v = [x; C x]
+        self.v = self.vv[:k]
+        self.Y = np.empty(2 * k)  # [max(-y, 0); max(y, 0)], y = [z_box; z]
+        self.Y_lo = self.Y[:k]
+        self.A = np.empty(2 * k)  # |E|
+
+
+def _kkt_full(d: _Dense, x: np.ndarray, z: np.ndarray, z_box: np.ndarray,
+              work: _KKTWork | None = None) -> _KKT:
     """KKT residuals of ``(x, z, z_box)`` and their scales, rows and box stacked.
 
-    With ``v = [C x; x]``, ``y = [z; z_box]`` and the stacked bounds ``lo <= v <= hi``
+    With ``v = [x; C x]``, ``y = [z_box; z]`` and the stacked bounds ``lo <= v <= hi``
     (``d.bounds = [lo; hi]``), the lower and upper sides are handled together on doubled
     vectors: ``E = [lo - v; v - hi]`` (bound violations; primal infeasibility
     ``max(0, max E)``), ``Y = [max(-y, 0); max(y, 0)]`` (multipliers of the lower / upper
     bounds), complementarity ``max(Y |E|)`` with ``|E|`` taken as 0 on infinite bounds, dual
     sign ``max(Y [bound infinite])`` (a multiplier on an infinite bound). The six infinity
     norms are the row maxima of one zero-padded (6, .) array (all entries but ``E``'s are
-    >= 0, and ``E`` is clamped at 0 anyway), i.e. a single NumPy reduction.
+    >= 0, and ``E`` is clamped at 0 anyway), i.e. a single NumPy reduction. ``work``: the
+    buffers to use (a :class:`QPSolver`'s own; None or another size: fresh ones).
     """
     C = d.C
-    Cx = C @ x
-    Hx = d.H @ x
-    CTz = C.T @ z
-    n = x.shape[0]
-    k = Cx.shape[0] + n
-    k2 = 2 * k
-    W = np.zeros((6, max(k2, 4 * n)))
+    Cx = C.dot(x)  # (ndarray.dot: BLAS as @, without the matmul ufunc's overhead)
+    Hx = d.H.dot(x)
+    CTz = C.T.dot(z)
+    n, m = x.shape[0], Cx.shape[0]
+    if work is None or work.n != n or work.m != m:
+        work = _KKTWork(n, m)
     stat = Hx + d.g  # H x + g + C^T z + z_box, summed in this order
     stat += CTz
     stat += z_box
-    np.abs(stat, out=W[0, :n])
-    vv = np.concatenate((Cx, x, Cx, x))
-    E = W[1, :k2]
+    np.abs(stat, out=work.stat)
+    vv, E, Y, A = work.vv, work.E, work.Y, work.A
+    np.concatenate((x, Cx, x, Cx), out=vv)
     np.subtract(vv, d.bounds, out=E)  # [v - lo; v - hi]
-    np.negative(E[:k], out=E[:k])  # [lo - v; v - hi]
-    Y = np.concatenate((z, z_box, z, z_box))
-    np.negative(Y[:k], out=Y[:k])
+    np.negative(work.E_lo, out=work.E_lo)  # [lo - v; v - hi]
+    np.concatenate((z_box, z, z_box, z), out=Y)
+    np.negative(work.Y_lo, out=work.Y_lo)
     np.maximum(Y, 0.0, out=Y)
-    A = np.abs(E)
-    inf = d.not_finite
-    if inf is not None:
-        A[inf] = 0.0  # infinite bounds never bind
-        np.multiply(Y, inf, out=W[3, :k2])
-    else:
-        np.multiply(Y, 0.0, out=W[3, :k2])  # 0 (NaN for a NaN multiplier)
-    np.multiply(A, Y, out=W[2, :k2])
-    S = W[4, : 4 * n]
+    np.abs(E, out=A)
+    inf = ~np.isfinite(d.bounds)
+    A[inf] = 0.0  # infinite bounds never bind
+    np.multiply(Y, inf, out=work.dual_sign)  # (0 on finite bounds; NaN for a NaN multiplier)
+    np.multiply(A, Y, out=work.compl)
+    S = work.S
     np.concatenate((Hx, d.g, CTz, z_box), out=S)
     np.abs(S, out=S)
-    np.abs(vv[:k], out=W[5, :k])
-    stat_max, violation, compl, dual_sign, s_d, s_p = W.max(axis=1).tolist()
+    np.abs(work.v, out=work.v_abs)
+    stat_max, violation, compl, dual_sign, s_d, s_p = work.W.max(axis=1).tolist()
     return _KKT(
         stationarity=stat_max,
         primal_infeasibility=max(violation, 0.0) + 0.0,
@@ -307,6 +351,11 @@ def _kkt_full(d: _Dense, x: np.ndarray, z: np.ndarray, z_box: np.ndarray) -> _KK
         s_d=1.0 + s_d,
         s_p=1.0 + s_p,
     )
+
+
+#: The residuals of a "solved" accepted on an active-set backend's certificate: not
+#: recomputed (NaN; :func:`kkt_residuals` computes them on demand).
+_CERTIFIED = _KKT(*(math.nan,) * 6)
 
 
 def _kkt(d: _Dense, x: np.ndarray, z: np.ndarray, z_box: np.ndarray) -> dict[str, float]:
@@ -373,6 +422,28 @@ def _finite_or_zero(v: Any, size: int) -> np.ndarray:
     return out
 
 
+def all_finite(*arrays: np.ndarray) -> bool:
+    """Every entry of ``arrays`` is finite: ``np.isfinite(a).all()`` for each, in one pass
+    over their entries, counted with ``np.count_nonzero`` (about half the time on the
+    CBF-QP's small arrays)."""
+    flat = np.concatenate([a.ravel() for a in arrays]) if len(arrays) > 1 else arrays[0]
+    return bool(np.count_nonzero(np.isfinite(flat)) == flat.size)
+
+
+#: The largest double: the bounds test of :meth:`QPSolver.solve` clips infinities to it.
+_BIG = float(np.finfo(float).max)
+
+
+def _bounds_consistent(lo: np.ndarray, hi: np.ndarray) -> bool:
+    """``lo <= hi`` everywhere, with no ``lo = +inf``, no ``hi = -inf`` and no NaN.
+
+    With the infinities clipped to the largest double, ``max(lo, -BIG) <= min(hi, BIG)``
+    fails exactly there: ``lo = +inf`` stays above any clipped ``hi``, ``hi = -inf`` below
+    any clipped ``lo``, a NaN compares false, and finite bounds compare as they are.
+    """
+    return bool(np.count_nonzero(np.maximum(lo, -_BIG) <= np.minimum(hi, _BIG)) == lo.size)
+
+
 class _ProxsuiteBackend:
     """proxsuite dense ``QP`` class, warm-started from the previous result.
 
@@ -387,6 +458,10 @@ class _ProxsuiteBackend:
     that cap) to ``info.iter``. The status stays ``PROXQP_MAX_ITER_REACHED`` when the outer
     loop runs out, so ``info.iter_ext <= max_iter`` always and ``== max_iter`` then.
     """
+
+    certifies_kkt = False
+    """An approximate (augmented-Lagrangian) solve: every KKT condition is checked, including
+    the multipliers' signs (a warm-started proxsuite 0.8.0 "solved" once had a wrong-sign one)."""
 
     def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool,
                  max_iter_in: int) -> None:
@@ -479,6 +554,9 @@ class _OsqpBackend:
     continue to ``eps_abs`` within the remaining iteration budget, so the ADMM iterations of
     both stages add up to at most ``max_iter``.
     """
+
+    certifies_kkt = False
+    """ADMM is approximate: every KKT condition is checked."""
 
     def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool,
                  max_iter_in: int) -> None:
@@ -622,6 +700,19 @@ class _DaqpBackend:
     (its default ``eps_prox < 0``: automatic).
     """
 
+    certifies_kkt = True
+    """DAQP's exit "optimal" certifies the KKT conditions that :meth:`QPSolver.solve` would
+    recompute: it is the exact optimum (to rounding) of the final working set -- x solves that
+    set's equality-constrained KKT system (stationarity), every multiplier off the set is
+    exactly 0 and every row on it holds with equality (complementarity) -- a dual active-set
+    method keeps each multiplier on the side of its active bound (dual sign, to DAQP's
+    ``dual_tol``), and it stops only when no row is violated by more than ``primal_tol`` =
+    ``eps_abs`` (1e-9, absolute: tighter than the check's 1e-5 relative). So a DAQP "solved"
+    with finite x and multipliers is accepted as it is. The mapping of the data and of the
+    multipliers onto DAQP's is checked in ``tests/test_qp.py`` against closed forms, an exact
+    KKT solve and proxsuite; ``bench.py``'s QP table compares every CBF-QP of the cases with
+    a cold DAQP solve."""
+
     def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool,
                  max_iter_in: int) -> None:
         del max_iter_in  # one loop: each iteration adds or removes one row of the working set
@@ -631,7 +722,7 @@ class _DaqpBackend:
         self.n, self.m = n, m
         self.eps_abs, self.max_iter, self.warm_start = eps_abs, max_iter, warm_start
         self._model: Any = None
-        self._eq: np.ndarray | None = None  # equality mask [box; rows] of the current setup
+        self._eq: bytes | None = None  # equality mask [box; rows] of the current setup
 
     @property
     def is_warm(self) -> bool:
@@ -645,12 +736,13 @@ class _DaqpBackend:
         n, m = self.n, self.m
         # The Model keeps pointers to what it is given: only arrays of this call (d.H is
         # already one, d.g and d.C may be the caller's).
-        bupper = np.concatenate([d.ub, d.u])
-        blower = np.concatenate([d.lb, d.l])
+        k = n + m
+        blower, bupper = d.bounds[:k], d.bounds[k:]  # [lb; l], [ub; u]
         f, A = d.g.copy(), np.array(d.C, dtype=float, order="C")
-        eq = np.isfinite(blower) & (blower == bupper)
-        if (self._model is None or self._eq is None or not self.warm_start
-                or not np.array_equal(eq, self._eq)):
+        # QPSolver.solve has refused NaN bounds, l = +inf and u = -inf: equal bounds are finite
+        eq = blower == bupper
+        eq_key = eq.tobytes()
+        if self._model is None or not self.warm_start or eq_key != self._eq:
             model = self._daqp.Model()
             sense = np.where(eq, _DAQP_EQUALITY, 0).astype(np.intc)
             flag, _ = model.setup(d.H, f, A, bupper, blower, sense)
@@ -658,14 +750,20 @@ class _DaqpBackend:
                 self.reset()
                 return _RawResult(np.zeros(n), np.zeros(m), np.zeros(n), "failed", 0, 0)
             model.settings = {"primal_tol": self.eps_abs, "iter_limit": self.max_iter}
-            self._model, self._eq = model, eq
+            self._model, self._eq = model, eq_key
         elif self._model.update(H=d.H, f=f, A=A, bupper=bupper, blower=blower) < 0:
             self.reset()
             return _RawResult(np.zeros(n), np.zeros(m), np.zeros(n), "failed", 0, 0)
         x, _, exitflag, info = self._model.solve()
         status = _DAQP_STATUS.get(int(exitflag), "failed")
-        lam = np.asarray(info["lam"], dtype=float).reshape(-1)
+        lam = info["lam"]
+        if not _is_f64(lam, (n + m,)):
+            lam = np.asarray(lam, dtype=float).reshape(-1)
         iterations = int(info["iterations"])  # equals iter_limit on EXIT_ITERLIMIT
+        if status == "solved" and _is_f64(x, (n,)) and lam.shape == (n + m,):
+            # daqp returns fresh arrays (copies of its buffers): as they are, QPSolver._attempt
+            # checks that they are finite before it accepts them (certifies_kkt)
+            return _RawResult(x, lam[n:], lam[:n], status, iterations, iterations)
         return _RawResult(
             x=_finite_or_zero(x, n),
             z=_finite_or_zero(lam[n:], m),
@@ -705,6 +803,12 @@ class _QuadprogBackend:
     needed more main iterations is ``"max_iter"``, with its true count). ``warm_start`` is
     ignored (every solve is cold, :attr:`is_warm` is always False).
     """
+
+    certifies_kkt = True
+    """As DAQP's (:attr:`_DaqpBackend.certifies_kkt`): Goldfarb-Idnani returns the exact
+    optimum of its final active set when no row is violated, multipliers >= 0 on it (dual
+    feasible throughout) and 0 off it; the recombination above puts them on the side of
+    their bound."""
 
     def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool,
                  max_iter_in: int) -> None:
@@ -749,6 +853,11 @@ class _QuadprogBackend:
         y[up] += lam[k_eq + k_low:]
         main, dropped = int(iters[0]), int(iters[1])
         status = "solved" if main <= self.max_iter else "max_iter"
+        x = np.asarray(x, dtype=float)
+        if status == "solved" and x.shape == (n,):
+            # as they are: QPSolver._attempt checks that they are finite before it accepts
+            # them (certifies_kkt)
+            return _RawResult(x, y[:m], y[m:], status, main, main + dropped)
         return _RawResult(
             x=_finite_or_zero(x, n),
             z=_finite_or_zero(y[:m], m),
@@ -761,6 +870,10 @@ class _QuadprogBackend:
 
 class _Backend(Protocol):
     """What :class:`QPSolver` needs of a backend."""
+
+    certifies_kkt: bool
+    """A "solved" of this backend is the exact optimum of an active-set method (its exit
+    certifies the KKT conditions): :meth:`QPSolver.solve` does not recompute them."""
 
     def __init__(self, n: int, m: int, eps_abs: float, max_iter: int, warm_start: bool,
                  max_iter_in: int) -> None: ...
@@ -841,6 +954,8 @@ class QPSolver:
         """How many warm solves failed the KKT check and were repeated cold (for logging)."""
         self._backend = _BACKENDS[solver](self.n, self.m, eps_abs, self.max_iter, warm_start,
                                           self.max_iter_in)
+        self._kkt_work = _KKTWork(self.n, self.m)
+        self._certified = bool(getattr(self._backend, "certifies_kkt", False))
 
     def reset(self) -> None:
         """Forget the warm start: the next solve starts cold (fresh backend state)."""
@@ -860,6 +975,13 @@ class QPSolver:
             s_p = 1 + \max(\|Cx\|, \|x\|) \\
             \text{dual\_sign} &\le \epsilon\, s_d, \qquad
             \text{complementarity} \le \epsilon\, s_d\, s_p.
+
+        This check is made on every proxsuite and OSQP "success". A "solved" of the
+        active-set backends, DAQP and quadprog, is the exact optimum of their final working
+        set, certified by their exit (see ``_DaqpBackend.certifies_kkt``): it is accepted
+        without recomputing the residuals (``primal_residual`` and ``dual_residual`` are then
+        NaN: :func:`kkt_residuals` computes them) once its x and multipliers are finite.
+        A "solved" solution is always finite.
 
         Otherwise -- and whenever a warm-started solve ends in anything but "solved" --
         the solve is repeated once cold (proxsuite 0.8.0 occasionally reports "solved"
@@ -881,11 +1003,11 @@ class QPSolver:
         d = _as_dense(problem, self.n, self.m)
         k = self.m + self.n
         attempts = total = 0
-        if not np.isfinite(np.concatenate((d.H.ravel(), d.g, d.C.ravel()))).all():
+        if not all_finite(d.H, d.g, d.C):
             raw, status, kkt = self._trivial(d, "failed")
-        elif (not (d.bounds[:k] <= d.bounds[k:]).all()  # some l > u, or a NaN bound
-              or (d.bounds[:k] == np.inf).any() or (d.bounds[k:] == -np.inf).any()):
-            # (l = +inf or u = -inf: no x satisfies the row; OSQP would raise on it)
+        elif not _bounds_consistent(d.bounds[:k], d.bounds[k:]):
+            # some l > u, a NaN bound, or l = +inf or u = -inf (no x satisfies the row;
+            # OSQP would raise on it)
             raw, status, kkt = self._trivial(
                 d, "failed" if np.isnan(d.bounds).any() else "infeasible")
         else:
@@ -901,19 +1023,10 @@ class QPSolver:
                 attempts, total = 2, total + raw.iterations
         if status != "solved":
             self._backend.reset()  # never warm-start from a failed iterate
-        return QPSolution(
-            x=raw.x,
-            z=raw.z,
-            z_box=raw.z_box,
-            status=status,
-            iterations=raw.iterations,
-            solve_time_s=time.perf_counter() - t0,
-            primal_residual=kkt.primal_infeasibility,
-            dual_residual=kkt.stationarity,
-            inner_iterations=raw.inner_iterations,
-            total_iterations=total,
-            attempts=attempts,
-        )
+        return QPSolution(  # x, z, z_box, status, iterations, solve_time_s, primal_residual,
+            # dual_residual, inner_iterations, total_iterations, attempts (positional: cheaper)
+            raw.x, raw.z, raw.z_box, status, raw.iterations, time.perf_counter() - t0,
+            kkt.primal_infeasibility, kkt.stationarity, raw.inner_iterations, total, attempts)
 
     def _attempt(self, d: _Dense) -> tuple[_RawResult, QPStatus, _KKT]:
         """One backend solve, its KKT residuals and its status after the KKT check.
@@ -922,7 +1035,15 @@ class QPSolver:
         becomes "max_iter".
         """
         raw = self._backend.solve(d)
-        kkt = _kkt_full(d, raw.x, raw.z, raw.z_box)
+        if self._certified and raw.status == "solved":
+            if all_finite(raw.x, raw.z, raw.z_box):
+                if raw.iterations <= self.max_iter:
+                    return raw, "solved", _CERTIFIED  # see _DaqpBackend.certifies_kkt
+            else:  # no certificate without a finite solution: zeros instead, checked below
+                n, m = self.n, self.m
+                raw = raw._replace(x=_finite_or_zero(raw.x, n), z=_finite_or_zero(raw.z, m),
+                                   z_box=_finite_or_zero(raw.z_box, n))
+        kkt = _kkt_full(d, raw.x, raw.z, raw.z_box, self._kkt_work)
         status = raw.status
         if status == "solved" and raw.iterations > self.max_iter:
             status = "max_iter"
@@ -934,7 +1055,7 @@ class QPSolver:
         """A zero result for data the backends are not given (non-finite, or ``l > u``)."""
         raw = _RawResult(np.zeros(self.n), np.zeros(self.m), np.zeros(self.n), status, 0, 0)
         with np.errstate(invalid="ignore"):
-            kkt = _kkt_full(d, raw.x, raw.z, raw.z_box)
+            kkt = _kkt_full(d, raw.x, raw.z, raw.z_box, self._kkt_work)
         return raw, status, kkt
 
     def _kkt_ok(self, kkt: _KKT) -> bool:
