@@ -35,7 +35,8 @@ def timing_row(name: str, samples: list[float] | np.ndarray) -> dict[str, object
 #: (experiment id, simulated seconds). ours: long enough that set-up is < 10 % of the wall
 #: time, and for pomares2011 exp2 to include the operator's approach (from 8 s).
 REALTIME_RUNS = (("pomares2011.exp1", 6.0), ("pomares2011.exp2", 12.0),
-                 ("thomas2024.case1", 10.0), ("chan2011.simulation", 10.0))
+                 ("thomas2024.case1", 10.0), ("thomas2024.case2", 10.0),
+                 ("thomas2024.case3", 10.0), ("chan2011.simulation", 10.0))
 #: Modes timed: (name, config fields). ``render_full`` (every frame rendered in full) only
 #: where the config has ``camera_windows`` (pomares2011), beside its windowed ``render``.
 MODES = (("exact", {"camera_mode": "exact"}), ("render", {"camera_mode": "render"}),
