@@ -342,16 +342,27 @@ def test_controller_qp_and_stop_test_equal_the_previous_code_to_the_bit(
         assert n_estimated > 0, "no estimated normal reached the QP"
 
 
-def test_normalized_equals_to_normalized_to_the_bit(tmp_path: Path) -> None:
-    ctrl = build(replace(C.Case1Config(), camera_mode="exact"), tmp_path / "run")[1]
+def test_to_normalized_equals_its_formula_to_the_bit() -> None:
+    """Intrinsics.to_normalized's no-skew broadcast gives the bits of the general formula
+    (x = (u - u0 - s y) / fu, y = (v - v0) / fv), exact zeros and non-finite pixels included."""
+    K = sc.INTRINSICS
+
+    def formula(uv: np.ndarray) -> np.ndarray:
+        y = (uv[..., 1] - K.v0) / K.fv
+        return np.stack([(uv[..., 0] - K.u0 - K.skew * y) / K.fu, y], axis=-1)
+
+    assert K.skew == 0.0 and K.u0 != 0.0  # the fast branch is the one tested
     rng = np.random.default_rng(3)
     for _ in range(200):
         uv = rng.uniform(-50.0, 700.0, (4, 2))
         whole = rng.random((4, 2)) < 0.2
         uv[whole] = np.round(uv[whole])
-        assert same_bits(ctrl.normalized(uv), sc.INTRINSICS.to_normalized(uv))
-    uv = np.array([[sc.INTRINSICS.u0, sc.INTRINSICS.v0]] * 4)  # exact zeros
-    assert same_bits(ctrl.normalized(uv), sc.INTRINSICS.to_normalized(uv))
+        assert same_bits(K.to_normalized(uv), formula(uv))
+    uv = np.array([[K.u0, K.v0]] * 4)  # exact zeros
+    assert same_bits(K.to_normalized(uv), formula(uv))
+    uv[1] = (np.nan, np.inf)  # a lost dot: NaN x as the formula gives (0 * inf)
+    with np.errstate(invalid="ignore"):
+        assert same_bits(K.to_normalized(uv), formula(uv))
 
 
 # --------------------------------------------------------------------------------------

@@ -4,6 +4,7 @@ the mini-robot (or the indirect baseline), the hand idle."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import numpy as np
@@ -201,7 +202,7 @@ class Pomares2011Controller:
                 cols[f"su{i + 1}_u_true"], cols[f"su{i + 1}_v_true"] = true_u[i]
             return cols
 
-        self.rvc_cols = _Once(audit)  # computed only if a row of this frame is written
+        self.rvc_cols = functools.cache(audit)  # computed if a row of this frame is written
 
     def _human(self, q: np.ndarray, t: float, step: int, events: list[tuple[str, str]]
                ) -> tuple[HumanDistance | None, dict[str, float | str]]:
@@ -311,15 +312,3 @@ class Pomares2011Controller:
         return StepResult({"arm": self.qd_arm, "mini": tau, "fingers": self.hand_hold.copy()},
                           {}, events, lazy_columns=columns)
 
-
-class _Once:
-    """A function of no argument called at most once; its value is kept."""
-
-    def __init__(self, fn: Callable[[], dict[str, float | int | bool]]) -> None:
-        self.fn: Callable[[], dict[str, float | int | bool]] | None = fn
-        self.value: dict[str, float | int | bool] = {}
-
-    def __call__(self) -> dict[str, float | int | bool]:
-        if self.fn is not None:
-            self.value, self.fn = self.fn(), None
-        return self.value

@@ -152,23 +152,7 @@ class Thomas2024Controller:
         #: flange carries both ring 2 and the camera)
         self._jac_links = tuple(dict.fromkeys([*(self._ring_links if config.proximity else []),
                                                CAMERA_LINK]))
-        # Pixels -> normalised coordinates (Intrinsics.to_normalized): with no skew it is
-        # (u - u0) / fu, (v - v0) / fv, one broadcast operation instead of its five (its
-        # "- skew y" subtracts a zero, which changes no bit: tests/test_thomas2024_speed.py).
-        # None: a skewed camera, use to_normalized itself.
-        K = sc.INTRINSICS
-        self._px_offset: np.ndarray | None = None
-        self._px_scale: np.ndarray | None = None
-        if K.skew == 0.0:
-            self._px_offset, self._px_scale = np.array([K.u0, K.v0]), np.array([K.fu, K.fv])
         self.prev_status = "solved"
-
-    def normalized(self, uv: np.ndarray) -> np.ndarray:
-        """Pixel coordinates (N, 2) [px] -> normalised coordinates (N, 2) [-], bit for bit
-        ``sc.INTRINSICS.to_normalized(uv)``."""
-        if self._px_offset is None or self._px_scale is None:
-            return sc.INTRINSICS.to_normalized(uv)
-        return (np.asarray(uv, dtype=float) - self._px_offset) / self._px_scale
 
     def step(self, q: np.ndarray, uv: np.ndarray, found: np.ndarray, Z_exact: np.ndarray,
              readings: list[RingReading]) -> StepOutput:
@@ -177,7 +161,7 @@ class Thomas2024Controller:
         if np.count_nonzero(found) != np.size(found):  # a dot lost
             return StepOutput(np.zeros(n), "no_features", np.full(8, np.nan), np.zeros(m),
                               float("nan"), 0, 0.0, 0.0, "")
-        x = self.normalized(uv)
+        x = sc.INTRINSICS.to_normalized(uv)
         e_4p = (x - self.s_star).ravel()
         # eJ_e of eq. (7) and J_Nj of eq. (9), one pinocchio call per link
         J = {link: self.robot.frame_jacobian(link, q) for link in self._jac_links}

@@ -223,6 +223,11 @@ class Intrinsics:
         .. math:: y = (v - v_0) / f_v, \\qquad x = (u - u_0 - s y) / f_u
         """
         uv = np.asarray(uv, dtype=float)
+        if (self.skew == 0.0 and self.u0 != 0.0 and uv.shape[-1:] == (2,)
+                and np.count_nonzero(np.isfinite(uv)) == uv.size):
+            # no skew, finite pixels: one broadcast, the same bits as the formula below (its
+            # "- s y" subtracts a zero, and u - u0 is never -0 when u0 != 0)
+            return (uv - np.array((self.u0, self.v0))) / np.array((self.fu, self.fv))
         y = (uv[..., 1] - self.v0) / self.fv
         return np.stack([(uv[..., 0] - self.u0 - self.skew * y) / self.fu, y], axis=-1)
 

@@ -59,7 +59,7 @@ import numpy as np
 import pybullet as p
 
 from repro.errors import ConfigError
-from repro.sim.robot import _RESETS, JointLimits, JointSet, Robot
+from repro.sim.robot import JointLimits, JointSet, Robot, joint_states_stamp
 
 __all__ = [
     "BH8_DISTAL_JOINTS", "BH8_DISTAL_LINKS", "BH8_GEOMETRY", "BH8_JOINTS", "BH8_KNUCKLE_LINKS",
@@ -686,7 +686,7 @@ class FingerMotors(JointSet):
     def _states(self) -> tuple[np.ndarray, np.ndarray]:
         """(motor angles, their rates), read once per physics step (as a Robot's joint
         states: a step, a reset or :func:`repro.sim.robot.joint_states_changed` renews them)."""
-        key = (self.world.physics_steps, _RESETS[0])
+        key = joint_states_stamp(self.world)
         if key != self._states_key:
             s = p.getJointStates(self.body, self._joints, physicsClientId=self.client)
             self._now = (

@@ -1,6 +1,6 @@
 """Ground-truth distances from PyBullet's closest points, one query per pair of bodies and step.
 
-:meth:`repro.sim.scene.Scene.distances_of` asks, for a robot's body A and another body B, the
+:meth:`repro.sim.scene.Scene.distance_table` asks, for a robot's body A and another body B, the
 minimum distance from each of several *groups* of A's links (the joint groups of one chain:
 the PA-10, the mini-robot, the hand...) to B, capped at ``cap``. PyBullet's
 ``getClosestPoints(A, B, threshold)`` returns a point for every pair of links closer than

@@ -64,6 +64,12 @@ class JointLimits:
 _RESETS = [0]
 
 
+def joint_states_stamp(world: World) -> tuple[int, int]:
+    """What a cache of joint states read from PyBullet is valid for: ``world``'s physics steps
+    and the resets of any robot (:meth:`JointSet.reset`, :func:`joint_states_changed`)."""
+    return world.physics_steps, _RESETS[0]
+
+
 def joint_states_changed() -> None:
     """Tell every :class:`Robot` that its joints moved outside :meth:`JointSet.reset` and
     :meth:`World.step_physics` (its cached joint states are stale)."""
@@ -267,7 +273,7 @@ class Robot(JointSet):
 
     def _joint_states(self) -> tuple[np.ndarray, np.ndarray]:
         """(q, qd) as PyBullet has them now, cached until the next physics step or reset."""
-        key = (self.world.physics_steps, _RESETS[0])
+        key = joint_states_stamp(self.world)
         if key != self._states_key:
             states = p.getJointStates(self.body, self.pb_joints, physicsClientId=self.client)
             self._q_now = np.array([st[0] for st in states])
