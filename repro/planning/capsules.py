@@ -80,6 +80,19 @@ class Capsule:
             raise ConfigError(f"Capsule.radius must be finite and >= 0 [m], got {self.radius}")
         object.__setattr__(self, "radius", float(self.radius))
 
+    @classmethod
+    def of_owned(cls, p0: np.ndarray, p1: np.ndarray, radius: float) -> Capsule:
+        """A capsule that takes ``p0`` and ``p1`` as they are: (3,) float arrays of finite
+        values that the caller made for it and never writes (made read-only here), and a
+        finite ``radius`` >= 0 -- the caller's guarantee, not checked (a moving person's
+        twelve capsules at every step, built from checked inputs)."""
+        c = object.__new__(cls)
+        for name, v in (("p0", p0), ("p1", p1)):
+            v.setflags(write=False)
+            object.__setattr__(c, name, v)
+        object.__setattr__(c, "radius", float(radius))
+        return c
+
     @property
     def length(self) -> float:
         """Segment length ``|p1 - p0|`` [m] (the ``length`` of :meth:`Scene.add_capsule`)."""
@@ -98,9 +111,10 @@ class Capsule:
         immutable: a moving person's body pose and its tracker share it); a copy."""
         T = self.__dict__.get("_T_world")
         if T is None:
-            T = np.eye(4)
+            T = np.empty((4, 4))
             T[:3, :3] = rotation_z_to(self.p1 - self.p0)
             T[:3, 3] = self.centre
+            T[3] = (0.0, 0.0, 0.0, 1.0)
             object.__setattr__(self, "_T_world", T)
         return T.copy()
 
@@ -128,12 +142,16 @@ def rotation_z_to(axis: np.ndarray) -> np.ndarray:
     if n * n <= _EPS_SQ:
         return np.eye(3)
     u = axis / n
-    c = u[2]  # cos of the angle between z and u
+    u0, u1, c = u.tolist()  # c: cos of the angle between z and u
     if c < -1.0 + 1e-12:
         return _HALF_TURN_X.copy()  # (a hanging limb: most of a standing person's)
     # Rodrigues with k = z x u (|k| = sin): R = I + [k]x + [k]x^2 / (1 + c)
-    K = np.array([[0.0, 0.0, u[0]], [0.0, 0.0, u[1]], [-u[0], -u[1], 0.0]])
-    return np.eye(3) + K + K @ K / (1.0 + c)
+    K = np.array([[0.0, 0.0, u0], [0.0, 0.0, u1], [-u0, -u1, 0.0]])
+    return _EYE3 + K + K @ K / (1.0 + c)
+
+
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
 
 
 def segment_distance(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray

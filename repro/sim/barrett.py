@@ -575,6 +575,9 @@ class FingerDrive:
         """Its rate [rad/s]."""
         self._engaged = True
         self.targets = FingerTargets(q_p, q_d, True)
+        #: the joint commands sent last (engaged, q_proximal, motor speed, q_distal): a
+        #: PyBullet motor keeps its settings between steps, so the same ones are not resent
+        self._sent: tuple[bool, float, float, float] | None = None
 
     def joint_positions(self) -> tuple[float, float]:
         """(q_proximal, q_distal) [rad] as simulated."""
@@ -625,6 +628,10 @@ class FingerDrive:
         if t.engaged != self._engaged:
             set_gear_engaged(self.gear, self.client, t.engaged)
             self._engaged = t.engaged
+        sent = (t.engaged, t.q_proximal, md, t.q_distal)
+        if self._sent is not None and _same_floats(sent, self._sent):
+            return t  # the motors hold these settings already
+        self._sent = sent
         if t.engaged:
             p.setJointMotorControl2(self.body, self.j_proximal, p.POSITION_CONTROL,
                                     targetPosition=t.q_proximal,
@@ -645,6 +652,14 @@ class FingerDrive:
                                     positionGain=POSITION_GAIN, velocityGain=1.0,
                                     force=self.tau_max_distal, physicsClientId=self.client)
         return t
+
+
+def _same_floats(a: tuple[Any, ...], b: tuple[Any, ...]) -> bool:
+    """Equal element by element, a zero's sign included (the same bits for finite floats)."""
+    for x, y in zip(a, b, strict=True):
+        if x != y or (x == 0.0 and math.copysign(1.0, x) != math.copysign(1.0, y)):
+            return False
+    return True
 
 
 # ------------------------------------------------------------------------- the drive

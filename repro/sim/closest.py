@@ -85,8 +85,8 @@ class ClosestPoints:
 
     def __init__(self, client: int) -> None:
         self.client = client
-        #: (body A, body B, groups) -> threshold of the next query [m]
-        self._hint: dict[tuple[int, int, tuple[Links, ...]], float] = {}
+        #: (body A, groups) -> body B -> threshold of the next query [m]
+        self._hint: dict[tuple[int, tuple[Links, ...]], dict[int, float]] = {}
         self._members: dict[tuple[Links, ...], _Members] = {}
         self.queries = 0  # getClosestPoints calls made (for tests and benchmarks)
 
@@ -95,23 +95,33 @@ class ClosestPoints:
         """For each group of ``body_a``'s links, its minimum distance to ``body_b`` [m] (< 0:
         penetration), or ``cap`` when farther (exactly PyBullet's answer at threshold
         ``cap``)."""
-        key = (body_a, body_b, groups)
-        threshold = self._hint.get(key, cap)
-        if threshold < cap:
-            mins = self._ask(body_a, body_b, groups, threshold)
-            if any(m > threshold for m in mins):  # a group beyond the hint: ask everything
-                mins = self._ask(body_a, body_b, groups, cap)
-        else:
-            mins = self._ask(body_a, body_b, groups, cap)
-        out = [m if m < cap else cap for m in mins]
-        self._hint[key] = max(out, default=cap) + HINT_MARGIN
-        return out
+        return self.minima_of(body_a, (body_b,), groups, cap)[0]
 
-    def _ask(self, body_a: int, body_b: int, groups: tuple[Links, ...], threshold: float
-             ) -> list[float]:
-        self.queries += 1
+    def minima_of(self, body_a: int, bodies_b: Sequence[int], groups: tuple[Links, ...],
+                  cap: float) -> list[list[float]]:
+        """:meth:`minima` of ``body_a`` against each of ``bodies_b`` in turn (the runner's
+        every-step form: the groups' membership and the hints found once for all)."""
+        key = (body_a, groups)
+        hints = self._hint.get(key)
+        if hints is None:
+            hints = self._hint[key] = {}
         members = self._members.get(groups)
         if members is None:
             members = self._members[groups] = _Members(groups)
-        pts = p.getClosestPoints(body_a, body_b, threshold, physicsClientId=self.client)
-        return _minima(pts, members)
+        ask, client = p.getClosestPoints, self.client
+        out = []
+        for body_b in bodies_b:
+            threshold = hints.get(body_b, cap)
+            mins = _minima(ask(body_a, body_b, threshold, physicsClientId=client), members)
+            self.queries += 1
+            if threshold < cap:
+                for m in mins:
+                    if m > threshold:  # a group beyond the hint: ask everything
+                        mins = _minima(ask(body_a, body_b, cap, physicsClientId=client),
+                                       members)
+                        self.queries += 1
+                        break
+            mins = [m if m < cap else cap for m in mins]
+            hints[body_b] = max(mins, default=cap) + HINT_MARGIN
+            out.append(mins)
+        return out

@@ -101,6 +101,7 @@ class PositionReferenceDrive:
             raise UnknownChoiceError("inner loop", inner, self.INNER)
         self.robot, self.inner, self.gain = robot, inner, position_gain
         self.qd_max = np.asarray(robot.limits.qd_max, dtype=float)
+        self._qd_min = -self.qd_max
         self.q_min = np.asarray(robot.limits.q_min, dtype=float)
         self.q_max = np.asarray(robot.limits.q_max, dtype=float)
         self.q_ref = robot.q()
@@ -118,7 +119,7 @@ class PositionReferenceDrive:
     def substep(self, i: int, h: float) -> None:
         q0, v0 = self._from
         qr, vr = quintic(q0, v0, self.q_ref, self.v_ref, self._dt, i * h)
-        vr = np.clip(vr, -self.qd_max, self.qd_max)
+        vr = np.minimum(np.maximum(vr, self._qd_min), self.qd_max)  # np.clip's values
         if self.inner == "pd":
             self.robot.set_position_command(qr, vr, position_gain=self.gain)
             return

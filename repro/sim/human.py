@@ -257,14 +257,17 @@ class HumanMotion:
         self.body = body if body is not None else HumanBody()
         self.T_world_base = (np.eye(4) if T_world_base is None
                              else np.asarray(T_world_base, dtype=float).copy())
-        if self.T_world_base.shape != (4, 4):
-            raise ConfigError(f"T_world_base has shape {self.T_world_base.shape}, expected "
-                              "(4, 4)")
+        if self.T_world_base.shape != (4, 4) or not np.isfinite(self.T_world_base).all():
+            raise ConfigError(f"T_world_base must be a finite 4x4 pose, got "
+                              f"{self.T_world_base.tolist()}")
         self._side = 1.0 if path.arm == "left" else -1.0  # +y is the person's left
         #: per radii: (state, capsules) of the last call; a still person's capsules are
         #: computed once (values identical: the same state gives the same arithmetic)
         self._capsule_cache: dict[HumanRadii, tuple[tuple[bytes, float, _ArmPose],
                                                     list[tuple[str, Capsule]]]] = {}
+        #: the body-frame joints of the last arm poses (:meth:`_body_joints`)
+        self._body_cache: dict[tuple[_ArmPose, float, float, float],
+                               list[tuple[str, np.ndarray]]] = {}
         self._solve_stance()
         p = path
         self._t_walk_in_end = p.t_reach - p.reach_duration
@@ -367,6 +370,22 @@ class HumanMotion:
 
     def _joints(self, pos: np.ndarray, yaw: float, reach_arm: _ArmPose
                 ) -> dict[str, np.ndarray]:
+        c, s = math.cos(yaw), math.sin(yaw)
+        T_base_body = np.array([[c, -s, 0.0, pos[0]], [s, c, 0.0, pos[1]],
+                                [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+        T = self.T_world_base @ T_base_body
+        R, o = T[:3, :3], T[:3, 3]
+        return {k: R @ v + o for k, v in self._body_joints(reach_arm)}
+
+    def _body_joints(self, reach_arm: _ArmPose) -> list[tuple[str, np.ndarray]]:
+        """The skeleton's joints in the body frame (they depend on the arm pose alone: kept
+        for the last few poses, e.g. the whole of a walk)."""
+        a = reach_arm  # its zeros' signs too: the same bits, the same arithmetic
+        key = (a, math.copysign(1.0, a.phi), math.copysign(1.0, a.theta),
+               math.copysign(1.0, a.beta))
+        got = self._body_cache.get(key)
+        if got is not None:
+            return got
         b = self.body
         H = b.stature
         z = np.array([0.0, 0.0, 1.0])
@@ -388,11 +407,12 @@ class HumanMotion:
             P[f"hip_{tag}"] = P["hip"] + np.array([0.0, side * b.hip_half_width * H, 0.0])
             P[f"knee_{tag}"] = P[f"hip_{tag}"] - b.length("thigh") * z
             P[f"ankle_{tag}"] = P[f"knee_{tag}"] - b.length("shank") * z
-        c, s = math.cos(yaw), math.sin(yaw)
-        T_base_body = np.array([[c, -s, 0.0, pos[0]], [s, c, 0.0, pos[1]],
-                                [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-        T = self.T_world_base @ T_base_body
-        return {k: T[:3, :3] @ v + T[:3, 3] for k, v in P.items()}
+        for v in P.values():
+            v.setflags(write=False)
+        if len(self._body_cache) >= 8:  # ours: a reach or a withdrawal makes a new pose per step
+            self._body_cache.clear()
+        got = self._body_cache[key] = list(P.items())
+        return got
 
     def capsules(self, t: float, radii: HumanRadii | None = None
                  ) -> list[tuple[str, Capsule]]:
@@ -412,18 +432,22 @@ class HumanMotion:
         cached = self._capsule_cache.get(r)
         if cached is not None and cached[0] == key:  # standing or holding: the same body
             return list(cached[1])  # (Capsule is immutable)
+        if not all(map(math.isfinite, (*np.asarray(pos, dtype=float).tolist(), yaw,
+                                        reach_arm.phi, reach_arm.theta, reach_arm.beta))):
+            raise ConfigError(f"the person's state at t = {t} s is not finite: position "
+                              f"{pos}, yaw {yaw}, arm {reach_arm}")
+        # finite state, finite T_world_base and body: finite joints, fresh arrays each
         J = self._joints(pos, yaw, reach_arm)
-        out = [("torso", Capsule(J["hip"], J["neck"], r.torso)),
-               ("head", Capsule(J["neck"], J["head_top"], r.head))]
+        cap = Capsule.of_owned
+        out = [("torso", cap(J["hip"], J["neck"], r.torso)),
+               ("head", cap(J["neck"], J["head_top"], r.head))]
         for tag in ("l", "r"):
-            out += [(f"upper_arm_{tag}", Capsule(J[f"shoulder_{tag}"], J[f"elbow_{tag}"],
-                                                 r.upper_arm)),
-                    (f"forearm_{tag}", Capsule(J[f"elbow_{tag}"], J[f"wrist_{tag}"],
-                                               r.forearm)),
-                    (f"hand_{tag}", Capsule(J[f"wrist_{tag}"], J[f"fingertip_{tag}"],
-                                            r.hand)),
-                    (f"thigh_{tag}", Capsule(J[f"hip_{tag}"], J[f"knee_{tag}"], r.thigh)),
-                    (f"shank_{tag}", Capsule(J[f"knee_{tag}"], J[f"ankle_{tag}"], r.shank))]
+            out += [(f"upper_arm_{tag}", cap(J[f"shoulder_{tag}"], J[f"elbow_{tag}"],
+                                             r.upper_arm)),
+                    (f"forearm_{tag}", cap(J[f"elbow_{tag}"], J[f"wrist_{tag}"], r.forearm)),
+                    (f"hand_{tag}", cap(J[f"wrist_{tag}"], J[f"fingertip_{tag}"], r.hand)),
+                    (f"thigh_{tag}", cap(J[f"hip_{tag}"], J[f"knee_{tag}"], r.thigh)),
+                    (f"shank_{tag}", cap(J[f"knee_{tag}"], J[f"ankle_{tag}"], r.shank))]
         self._capsule_cache[r] = (key, out)
         return list(out)
 

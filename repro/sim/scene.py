@@ -205,7 +205,8 @@ class Scene:
         self.mirror: World | None = World(world_config) if render else None
         self.run_dir = Path(run_dir) if run_dir is not None else None
         self.bodies: dict[str, SceneBody] = {}
-        self._others_memo: dict[tuple[int, int], list[tuple[str, list[int]]]] = {}
+        self._others_memo: dict[tuple[int, int], tuple[tuple[str, ...], list[int],
+                                                       list[tuple[int, int]] | None]] = {}
         self._closest = ClosestPoints(self.physics.client)
         #: robots of a distances_of call (kept alive: their ids are the key) -> per chain:
         #: the chain, its robots' positions in the call, their links
@@ -528,34 +529,46 @@ class Scene:
                                   else frozenset(links) for i in idx))
                 for full, idx in chains.values()])
         out: list[tuple[tuple[str, ...], list[float]]] = [((), [])] * len(robots)
-        minima = self._closest.minima
+        cap = float(max_distance)
+        minima_of = self._closest.minima_of
         for full, idx, groups in plan[1]:
-            others = self._others(full)
-            names = tuple(name for name, _ in others)
-            values: list[list[float]] = [[] for _ in idx]
-            for _, ids in others:
-                if len(ids) == 1:
-                    best = minima(full.body, ids[0], groups, max_distance)
-                else:  # a compound body: the minimum over its parts
-                    best = [max_distance] * len(idx)
-                    for bid in ids:
-                        for j, d in enumerate(minima(full.body, bid, groups, max_distance)):
+            names, ids, spans = self._others(full)
+            per_body = minima_of(full.body, ids, groups, cap)  # [id][group]
+            if spans is None:  # one PyBullet body per scene body
+                values = [list(col) for col in zip(*per_body, strict=True)] if per_body else [
+                    [] for _ in idx]
+            else:  # a compound body: the minimum over its parts
+                values = [[] for _ in idx]
+                for start, stop in spans:
+                    best = [cap] * len(idx)
+                    for mins in per_body[start:stop]:
+                        for j, d in enumerate(mins):
                             if d < best[j]:
                                 best[j] = d
-                for vals, d in zip(values, best, strict=True):
-                    vals.append(float(d))
+                    for vals, d in zip(values, best, strict=True):
+                        vals.append(d)
             for i, vals in zip(idx, values, strict=True):
                 out[i] = (names, vals)
         return out
 
-    def _others(self, full: JointSet) -> list[tuple[str, list[int]]]:
-        """(name, PyBullet ids) of every body with a collision shape but ``full`` (kept until
-        a body is added)."""
+    def _others(self, full: JointSet
+                ) -> tuple[tuple[str, ...], list[int], list[tuple[int, int]] | None]:
+        """Every body with a collision shape but ``full``: their names, their PyBullet ids
+        in order, and each name's span of ids (None when every body is one id); kept until
+        a body is added."""
         key = (id(full), len(self.bodies))
         got = self._others_memo.get(key)
         if got is None:
-            got = self._others_memo[key] = [(b.name, b.ids) for b in self.bodies.values()
-                                            if b.collision and b.robot is not full]
+            others = [(b.name, b.ids) for b in self.bodies.values()
+                      if b.collision and b.robot is not full]
+            ids: list[int] = []
+            spans: list[tuple[int, int]] = []
+            for _, bids in others:
+                spans.append((len(ids), len(ids) + len(bids)))
+                ids.extend(bids)
+            got = self._others_memo[key] = (
+                tuple(name for name, _ in others), ids,
+                None if all(len(bids) == 1 for _, bids in others) else spans)
         return got
 
     # -------------------------------------------------------- sensors, frames
