@@ -70,9 +70,9 @@ def test_hinted_queries_equal_one_full_query(scene: Scene) -> None:
         scene.move("limb", _pose(np.array([0.9, 0.4, 0.5]) + rng.normal(
             0.0, 0.5 if jump else 0.01, 3)))
         for bid in ids.values():
-            before = cp.queries
+            before, skipped = cp.queries, cp.skipped
             got = cp.minima(robot.body, bid, groups, DISTANCE_CAP)
-            fallbacks += cp.queries - before - 1
+            fallbacks += cp.queries - before - 1 + (cp.skipped - skipped)  # (a skip: none)
             assert got == _brute(scene, robot.body, bid, groups, DISTANCE_CAP)  # to the bit
     assert fallbacks > 0  # the second (full) query was exercised
     assert cp.queries < 2 * 60 * len(ids)  # ... and is not asked every time
@@ -104,3 +104,43 @@ def test_group_minima_keeps_each_groups_own_links() -> None:
            (0, 1, 2, 5, -1, 0, 0, 0, 0.20), (0, 1, 2, 9, -1, 0, 0, 0, -0.01)]
     assert group_minima(pts, (None, frozenset({5}), frozenset({6, 7}), frozenset({8}))) == [
         -0.01, 0.20, 0.10, math.inf]
+
+
+def test_bodies_beyond_the_cap_are_proved_so_by_boxes(scene: Scene) -> None:
+    """A limb that wanders around the cap's sphere (in, just out, far out) and a robot that
+    moves: the answers with the box test equal the full query's to the bit, bodies far
+    beyond the cap are not asked, and one just beyond it is (its boxes are within
+    cap + FAR_MARGIN)."""
+    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
+    groups_js = [scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True),
+                 scene.add_joint_group("pa10", "hand", HAND_JOINTS, "bh8_")]
+    scene.add_capsule("limb", 0.05, 0.3, _pose(np.array([3.0, 0.0, 0.5])), (1, 0, 0, 1),
+                      moving=True)
+    groups = (None, *(frozenset(g.links) for g in groups_js))
+    bid = scene["limb"].ids[0]
+    cp = ClosestPoints(scene.physics.client)
+    rng = np.random.default_rng(7)
+    q0 = robot.q()
+    for k in range(150):
+        robot.reset(q0 + rng.normal(0.0, 0.3, q0.shape))
+        r = [0.3, 1.4, 1.6, 2.0, 4.0][k % 5] + rng.uniform(-0.3, 0.3)
+        a = rng.uniform(0.0, 2.0 * np.pi)
+        scene.move("limb", _pose(np.array([r * np.cos(a), r * np.sin(a), 0.6])))
+        for _ in range(2):  # the second asks with the hint of the first
+            assert cp.minima(robot.body, bid, groups, DISTANCE_CAP) == _brute(
+                scene, robot.body, bid, groups, DISTANCE_CAP)
+    assert cp.skipped > 30 and cp.queries > 100  # both ways taken
+    # the box test itself: PyBullet's link boxes hold the closest points of every link
+    lo, hi = cp.box(robot.body)
+    for pt in p.getClosestPoints(robot.body, bid, 10.0, physicsClientId=scene.physics.client):
+        assert all(lo[i] - 1e-9 <= pt[5][i] <= hi[i] + 1e-9 for i in range(3))
+
+
+def test_the_box_gap_is_the_distance_between_boxes() -> None:
+    from repro.sim.closest import _box_gap
+
+    box = ([0.0, 0.0, 0.0], [1.0, 1.0, 1.0])
+    assert _box_gap(box, [0.5, 0.5, 0.5], [2.0, 2.0, 2.0]) == 0.0  # overlapping
+    assert _box_gap(box, [4.0, 0.2, 0.2], [5.0, 0.3, 0.3]) == 3.0  # along x
+    assert _box_gap(box, [-4.0, -5.0, 0.2], [-3.0, -4.0, 0.3]) == 5.0  # 3-4-5 below
+    assert _box_gap(box, [2.0, 3.0, 1.0], [2.5, 3.5, 1.5]) == math.hypot(1.0, 2.0)
