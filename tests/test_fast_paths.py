@@ -239,3 +239,113 @@ def test_distance_table_is_each_body_s_full_query_compounds_included() -> None:
             assert names == ("thing", "limb") and values == want, k
     finally:
         scene.close()
+
+
+# ---------------------------------------------------------------------------- small pieces
+def _pose_to_pb_before(T: np.ndarray) -> tuple[list[float], list[float]]:
+    """repro.sim.world.pose_to_pb before issue 15's change (verbatim)."""
+    (r00, r01, r02, x), (r10, r11, r12, y), (r20, r21, r22, z) = np.asarray(
+        T, dtype=float)[:3].tolist()
+    tr = r00 + r11 + r22
+    diag = (r00, r11, r22, tr)
+    choice = diag.index(max(diag))
+    if choice == 3:
+        q = [r21 - r12, r02 - r20, r10 - r01, 1.0 + tr]
+    else:
+        R = ((r00, r01, r02), (r10, r11, r12), (r20, r21, r22))
+        i = choice
+        j, k = (i + 1) % 3, (i + 2) % 3
+        q = [0.0, 0.0, 0.0, R[k][j] - R[j][k]]
+        q[i] = 1.0 - tr + 2.0 * R[i][i]
+        q[j] = R[j][i] + R[i][j]
+        q[k] = R[k][i] + R[i][k]
+    qa = np.array(q)
+    qa /= np.sqrt(qa @ qa)
+    return [x, y, z], qa.tolist()
+
+
+def test_pose_to_pb_equals_the_code_before() -> None:
+    from scipy.spatial.transform import Rotation
+
+    from repro.sim.world import pose_to_pb
+
+    rng = np.random.default_rng(11)
+    Ts = []
+    for R in Rotation.random(3000, random_state=rng).as_matrix():
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, rng.normal(size=3)
+        Ts.append(T)
+    for R in (np.eye(3), np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]),
+              -np.eye(3), np.zeros((3, 3))):  # (the last: not a rotation, 0/0 as before)
+        T = np.eye(4)
+        T[:3, :3] = R
+        Ts.append(T)
+    with np.errstate(all="ignore"):
+        for T in Ts:
+            a, b = pose_to_pb(T), _pose_to_pb_before(T)
+            assert _same(a[0], b[0]) and _same(a[1], b[1]), T
+
+
+def test_vvs_pinv_is_numpy_s_to_the_bit() -> None:
+    from repro.vision.vvs import pinv
+
+    rng = np.random.default_rng(13)
+    for i in range(2000):
+        A = rng.normal(size=(int(rng.integers(6, 13)), 6)) * rng.choice([1e-4, 1.0, 1e4])
+        if i % 7 == 0:
+            A[:, 3] = A[:, 1]  # rank deficient: a cut singular value
+        if i % 50 == 0:
+            A[:] = 0.0
+        assert _same(pinv(A), np.linalg.pinv(A))
+
+
+def test_drive_clips_equal_np_clip_and_torques_are_set_torque_command_s(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from repro.sim.drives import TorqueDrive, _nonzero_clip
+    from repro.sim.pa10 import ALL_JOINTS, ALL_LIMITS, pa10_urdf_path
+    from repro.sim.robot import Robot
+
+    rng = np.random.default_rng(17)
+    for _ in range(3000):
+        hi = rng.uniform(1e-6, 5.0, 7)
+        x = rng.normal(size=7) * 3.0
+        pick = rng.integers(0, 6, 7)
+        x = np.where(pick == 0, hi, np.where(pick == 1, -hi, np.where(
+            pick == 2, -0.0, np.where(pick == 3, np.nan, x))))
+        assert _same(_nonzero_clip(-hi, hi)(x), np.clip(x, -hi, hi))
+    with World(WorldConfig(physics_dt=1e-3, control_dt=1e-3)) as world:
+        robot = Robot(world, pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS)
+        drive = TorqueDrive(robot)
+        sent: list[list[float]] = []
+        real = p.setJointMotorControlArray
+        monkeypatch.setattr(p, "setJointMotorControlArray",
+                            lambda *a, **kw: sent.append(list(kw["forces"])) or real(*a, **kw))
+        for _ in range(20):
+            u = rng.normal(size=robot.n) * 3.0 * np.asarray(ALL_LIMITS.tau_max)
+            drive.command(u, 1e-3)
+            drive.substep(1, 1e-3)
+            robot.set_torque_command(u)  # the definition: clip, then send
+            assert _same(sent[-2], sent[-1])
+
+
+def test_the_runner_s_ground_truth_projection_is_the_camera_s() -> None:
+    """Camera.measure keeps the exact projection it made; it equals project_points of the
+    same poses (what the runner's audit computed itself before)."""
+    from repro.sensors.camera import project_points
+
+    cam = sc_camera()
+    target = sc.DOTS
+    T_wc = np.eye(4)
+    T_wc[:3, 3] = (0.0, 0.0, -0.4)
+    T_target = np.eye(4)
+    uv, found, Z = cam.measure(-1, T_wc, target, T_target)
+    P, uv_true, Z2 = cam.last_projection  # type: ignore[misc]
+    assert _same(P, target.points_world(T_target))
+    want, Zw = project_points(cam.intrinsics, T_wc, P)
+    assert _same(uv_true, want) and _same(Z2, Zw) and _same(Z, Zw)
+
+
+def sc_camera():  # type: ignore[no-untyped-def]
+    from repro.sensors.camera import Camera
+
+    return Camera(sc.INTRINSICS, mode="exact")

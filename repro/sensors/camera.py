@@ -932,6 +932,9 @@ class Camera:
             its last detections; :meth:`reset_windows` forgets them).
         last_frame: what the last ``"render"`` frame rendered (None before one, and
             always None without ``window``).
+        last_projection: the exact projection :meth:`measure` made last, ``(P_world (N, 3)
+            [m], uv (N, 2) [px], Z (N,) [m])`` of the target's dot centres (the audit's
+            ground truth, not computed twice); None before a frame.
     """
 
     intrinsics: Intrinsics
@@ -942,6 +945,8 @@ class Camera:
                                            compare=False)
     _tracker: WindowTracker | None = field(default=None, init=False, repr=False,
                                            compare=False)
+    last_projection: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
+        default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.mode not in CAMERA_MODES:
@@ -1002,8 +1007,9 @@ class Camera:
         """
         if self.mode not in CAMERA_MODES:
             raise UnknownChoiceError("camera mode", self.mode, CAMERA_MODES)
-        uv_exact, Z = project_points(self.intrinsics, T_world_camera,
-                                     target.points_world(T_world_target))
+        P = target.points_world(T_world_target)
+        uv_exact, Z = project_points(self.intrinsics, T_world_camera, P)
+        self.last_projection = (P, uv_exact, Z)
         if self.mode == "exact":
             found = (Z > 0) & self.intrinsics.in_image(uv_exact)
             uv = np.where(found[:, None], uv_exact, np.nan)

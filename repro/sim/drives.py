@@ -19,6 +19,7 @@ and never gets more than ``tau_max``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -79,6 +80,15 @@ class VelocityDrive:
         return np.zeros(self.robot.n)
 
 
+def _nonzero_clip(lo: np.ndarray, hi: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """``x -> np.clip(x, lo, hi)`` for bounds with no zero (NaN propagates as in np.clip),
+    without np.clip's wrapper: the same values (they differ only on a zero bound, where
+    np.clip gives +0.0 and np.maximum keeps -0.0)."""
+    def clip(x: np.ndarray) -> np.ndarray:
+        return np.minimum(np.maximum(x, lo), hi)
+    return clip
+
+
 class PositionReferenceDrive:
     """A velocity command ``qd`` [rad/s] becomes the quintic reference from
     ``(q_ref, v_ref)`` to ``(q_ref + dt qd, qd)`` over the period, tracked at every physics
@@ -102,6 +112,10 @@ class PositionReferenceDrive:
         self.robot, self.inner, self.gain = robot, inner, position_gain
         self.qd_max = np.asarray(robot.limits.qd_max, dtype=float)
         self._qd_min = -self.qd_max
+        #: np.clip(x, -qd_max, qd_max) as np.minimum(np.maximum(...)): the same values when
+        #: no bound is zero (the two differ on a zero's sign only)
+        self._clip_qd = (_nonzero_clip(self._qd_min, self.qd_max)
+                         if bool(np.all(self.qd_max > 0.0)) else None)
         self.q_min = np.asarray(robot.limits.q_min, dtype=float)
         self.q_max = np.asarray(robot.limits.q_max, dtype=float)
         self.q_ref = robot.q()
@@ -110,7 +124,8 @@ class PositionReferenceDrive:
         self._dt = 0.0
 
     def command(self, u: np.ndarray, dt: float) -> np.ndarray:
-        qd = np.clip(np.asarray(u, dtype=float), -self.qd_max, self.qd_max)
+        qd = (np.clip(np.asarray(u, dtype=float), -self.qd_max, self.qd_max)
+              if self._clip_qd is None else self._clip_qd(np.asarray(u, dtype=float)))
         target = np.clip(self.q_ref + dt * qd, self.q_min, self.q_max)
         self._from = (self.q_ref, self.v_ref)
         self.q_ref, self.v_ref, self._dt = target, qd, dt
@@ -119,7 +134,8 @@ class PositionReferenceDrive:
     def substep(self, i: int, h: float) -> None:
         q0, v0 = self._from
         qr, vr = quintic(q0, v0, self.q_ref, self.v_ref, self._dt, i * h)
-        vr = np.minimum(np.maximum(vr, self._qd_min), self.qd_max)  # np.clip's values
+        vr = (np.clip(vr, -self.qd_max, self.qd_max) if self._clip_qd is None
+              else self._clip_qd(vr))
         if self.inner == "pd":
             self.robot.set_position_command(qr, vr, position_gain=self.gain)
             return
@@ -145,14 +161,21 @@ class TorqueDrive:
         self.robot = robot
         self.tau_max = np.asarray(robot.limits.tau_max, dtype=float)
         self._tau = np.zeros(robot.n)
+        self._forces: list[float] | None = None
         robot.torque_mode()
 
     def command(self, u: np.ndarray, dt: float) -> np.ndarray:
         self._tau = np.clip(np.asarray(u, dtype=float), -self.tau_max, self.tau_max)
+        self._forces = None
         return self._tau
 
     def substep(self, i: int, h: float) -> None:
-        self.robot.set_torque_command(self._tau)
+        # the command is within +-tau_max already (set_torque_command's clip would return
+        # it as it is): the same forces, listed once per command
+        if self._forces is None:
+            self._forces = self._tau.tolist()
+        p.setJointMotorControlArray(self.robot.body, self.robot.pb_joints, p.TORQUE_CONTROL,
+                                    forces=self._forces, physicsClientId=self.robot.client)
 
     def safe_command(self) -> np.ndarray:
         # Hold against gravity (a drive's brake would do the same).

@@ -492,6 +492,8 @@ class _Runner:
         target = body.dot_target
         assert target is not None
         T_wc = cam.pose(q)
+        if getattr(cam.camera, "last_projection", None) is not None:
+            cam.camera.last_projection = None  # (a camera that does not keep it: not stale)
         tic = time.perf_counter()
         uv, found, Z = cam.camera.measure(scene.render_client, T_wc, target, body.T_world)
         row[f"{cam.name}_render_s"] = time.perf_counter() - tic
@@ -506,8 +508,14 @@ class _Runner:
         pos, quat = pose_to_pb(T_wc)
         for c, v in zip(pose_columns(cam.name), pos + quat, strict=True):
             row[c] = v
-        P = target.points_world(body.T_world)
-        uv_true, _ = project_points(cam.camera.intrinsics, T_wc, P)
+        # the exact projection of the dot centres: the one the camera made of the same
+        # poses (when it keeps it), else made here
+        proj = getattr(cam.camera, "last_projection", None)
+        if proj is not None:
+            P, uv_true = proj[0], proj[1]
+        else:
+            P = target.points_world(body.T_world)
+            uv_true, _ = project_points(cam.camera.intrinsics, T_wc, P)
         visible = _visible(scene, T_wc, P, body.T_world[:3, 2], uv_true, Z, cam.camera)
         err = np.where(found, np.linalg.norm(uv - uv_true, axis=1), np.nan)
         if cam.log_view_angle:
@@ -535,22 +543,30 @@ class _Runner:
                 a.points_mismatched.add(j)
             if hidden[i]:
                 a.points_hidden_found.add(j)
-            self.onset(f"{s}_mismatch", bool(bad[i]), t, k, "feature_mismatch",
-                       f"{cam.name} point {j} detected {err[i]:.1f} px from the projection "
-                       f"of its model point (tolerance {cam.tol_px} px)",
-                       f"{cam.name} point {j} back within {cam.tol_px} px")
-            if not found[i]:
-                cause = _why_missed(bool(Z[i] > 0 and cam.camera.intrinsics.in_image(
-                    uv_true[i:i + 1])[0]), bool(visible[i]), T_wc[:3, 3], P[i],
-                    body.T_world[:3, 2])
-            self.onset(f"{s}_missed", not found[i], t, k, "feature_missed",
-                       f"audit: {cam.name} point {j} not detected; ground truth: "
-                       f"{cause if not found[i] else ''}",
-                       f"{cam.name} point {j} detected again")
-            self.onset(f"{s}_hidden", bool(hidden[i]), t, k, "hidden_found",
-                       f"{cam.name} point {j} reported found but its model point is not "
-                       "visible (occluded or outside the image)",
-                       f"{cam.name} point {j} visible again or no longer found")
+            # an event only where a condition starts or ends (its text formatted then)
+            flags = self._flags
+            key, now = f"{s}_mismatch", bool(bad[i])
+            if now != flags.get(key, False):
+                self.onset(key, now, t, k, "feature_mismatch",
+                           f"{cam.name} point {j} detected {err[i]:.1f} px from the "
+                           f"projection of its model point (tolerance {cam.tol_px} px)",
+                           f"{cam.name} point {j} back within {cam.tol_px} px")
+            key, now = f"{s}_missed", not found[i]
+            if now != flags.get(key, False):
+                cause = ""
+                if not found[i]:
+                    cause = _why_missed(bool(Z[i] > 0 and cam.camera.intrinsics.in_image(
+                        uv_true[i:i + 1])[0]), bool(visible[i]), T_wc[:3, 3], P[i],
+                        body.T_world[:3, 2])
+                self.onset(key, now, t, k, "feature_missed",
+                           f"audit: {cam.name} point {j} not detected; ground truth: {cause}",
+                           f"{cam.name} point {j} detected again")
+            key, now = f"{s}_hidden", bool(hidden[i])
+            if now != flags.get(key, False):
+                self.onset(key, now, t, k, "hidden_found",
+                           f"{cam.name} point {j} reported found but its model point is not "
+                           "visible (occluded or outside the image)",
+                           f"{cam.name} point {j} visible again or no longer found")
         return Features(uv, found, Z)
 
     def ground_truth(self, t: float, k: int, row: dict[str, Scalar] | None) -> None:

@@ -472,12 +472,15 @@ class Scene:
     def move(self, name: str, T_world: np.ndarray) -> None:
         """Put body ``name`` at ``T_world`` (a moving hand, a human): at once in the physics
         client; in the render mirror when something next renders (:attr:`render_client`)."""
-        body = self[name]
+        body = self.bodies.get(name)
+        if body is None:
+            raise UnknownChoiceError("scene body", name, self.bodies)
         if not body.moving:
             raise ConfigError(f"body {name!r} was not added with moving=True")
         T_world = np.asarray(T_world, dtype=float)
-        if T_world.tobytes() == body.T_world.tobytes() or (
-                T_world.shape == body.T_world.shape and (T_world == body.T_world).all()):
+        old = body.T_world
+        if T_world.tobytes() == old.tobytes() or (
+                T_world.shape == old.shape and T_world.tolist() == old.tolist()):
             return  # where it is: resetting a body to its own pose changes nothing
         _place(self.physics.client, body.ids, body, T_world)
         if body.render_ids:

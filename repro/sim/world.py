@@ -8,6 +8,7 @@ process) creates its own :class:`World`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from types import TracebackType
 
@@ -144,8 +145,14 @@ def pose_to_pb(T: np.ndarray) -> tuple[list[float], list[float]]:
         q[j] = R[j][i] + R[i][j]
         q[k] = R[k][i] + R[i][k]
     qa = np.array(q)
-    qa /= np.sqrt(qa @ qa)  # numpy's dot, as before (its summation order is BLAS's)
-    return [x, y, z], qa.tolist()
+    # numpy's dot, as before (its summation order is BLAS's); then the same correctly
+    # rounded square root and divisions as numpy's, in Python floats
+    n2 = float(qa @ qa)
+    if not n2 > 0.0:  # (not a rotation: numpy's 0/0 or NaN, as before)
+        qa /= np.sqrt(n2)
+        return [x, y, z], qa.tolist()
+    n = math.sqrt(n2)
+    return [x, y, z], [q[0] / n, q[1] / n, q[2] / n, q[3] / n]
 
 
 def pb_to_pose(pos: tuple[float, ...], quat: tuple[float, ...]) -> np.ndarray:
