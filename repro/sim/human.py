@@ -51,6 +51,10 @@ if TYPE_CHECKING:
     from repro.sim.scene import Scene
 
 V_MAX = 2.0  # [m/s] human joint speed bound (facts sheet, from SaRA's joint_v_max)
+#: Arm poses whose body-frame skeleton is kept. ours: a memory bound, not a value rule (a
+#: pose not kept is computed again, to the same bits): a walk or a hold keeps one pose, a
+#: reach or a withdrawal makes a new one every step, so a few entries hold all reuse.
+_BODY_CACHE_SIZE = 8
 
 # Winter Table 4.1 (facts sheet): segment lengths as fractions of the stature H.
 SEGMENT_FRACTIONS: dict[str, float] = {
@@ -409,7 +413,7 @@ class HumanMotion:
             P[f"ankle_{tag}"] = P[f"knee_{tag}"] - b.length("shank") * z
         for v in P.values():
             v.setflags(write=False)
-        if len(self._body_cache) >= 8:  # ours: a reach or a withdrawal makes a new pose per step
+        if len(self._body_cache) >= _BODY_CACHE_SIZE:
             self._body_cache.clear()
         got = self._body_cache[key] = list(P.items())
         return got
