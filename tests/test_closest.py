@@ -144,3 +144,25 @@ def test_the_box_gap_is_the_distance_between_boxes() -> None:
     assert _box_gap(box, [4.0, 0.2, 0.2], [5.0, 0.3, 0.3]) == 3.0  # along x
     assert _box_gap(box, [-4.0, -5.0, 0.2], [-3.0, -4.0, 0.3]) == 5.0  # 3-4-5 below
     assert _box_gap(box, [2.0, 3.0, 1.0], [2.5, 3.5, 1.5]) == math.hypot(1.0, 2.0)
+
+
+def test_the_robot_box_holds_its_shapes_while_the_physics_moves_it(scene: Scene) -> None:
+    """Stepped (not reset) at 20 rad/s: the gap between the robot's box and a body's never
+    exceeds their closest distance (the box is a lower bound on the shapes the query sees)."""
+    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
+    client = scene.physics.client
+    p.setGravity(0.0, 0.0, 0.0, physicsClientId=client)
+    p.setJointMotorControl2(robot.body, robot.pb_joints[0], p.VELOCITY_CONTROL,
+                            targetVelocity=20.0, force=1e6, physicsClientId=client)
+    from repro.sim.closest import _box_gap
+
+    cp = ClosestPoints(client)
+    for k, xyz in enumerate([(0.45, 0.1, 0.5), (0.9, -0.2, 0.3), (1.5, 0.0, 0.8)] * 20):
+        scene.physics.step_physics()
+        if k % 3 == 0:
+            scene.add_capsule(f"c{k}", 0.02, 0.1, _pose(np.array(xyz)), (1, 0, 0, 1))
+        bid = scene[f"c{k - k % 3}"].ids[0]
+        d = min(pt[8] for pt in p.getClosestPoints(robot.body, bid, 10.0,
+                                                  physicsClientId=client))
+        lo, hi = p.getAABB(bid, -1, physicsClientId=client)
+        assert _box_gap(cp.box(robot.body), lo, hi) <= d + 1e-9

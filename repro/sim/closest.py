@@ -25,8 +25,9 @@ same as the full query's, to the bit:
 
 A pair whose last answer was ``cap`` for every group (a body beyond the cap: the operator
 before he walks in) is not asked when bounding boxes prove it still is: PyBullet's own
-boxes of A's links (``getAABB``, from the same link transforms the query uses, grown by
-the shapes' margins) and of B, farther apart than ``cap`` + :data:`FAR_MARGIN`. Every
+boxes of A's links (``getAABB`` after a forward kinematics: the transforms of the shapes
+the query uses, grown by the shapes' margins) and of B, farther apart than ``cap`` +
+:data:`FAR_MARGIN`. Every
 shape pair is then farther than ``cap``, the query would return no point, and the answer
 is ``cap`` for every group, as asked.
 
@@ -49,8 +50,7 @@ __all__ = ["FAR_MARGIN", "HINT_MARGIN", "ClosestPoints", "group_minima"]
 HINT_MARGIN = 0.01
 #: A body counts as beyond the cap without a query when the bounding boxes are farther
 #: apart than the cap plus this [m]. ours: a speed rule, not a value rule (a body it does
-#: not skip is asked): 5 cm is far above the closest-points algorithm's error (~1e-6 m)
-#: and above the motion of any link over a 1 ms step, should a box lag one step behind.
+#: not skip is asked): 5 cm is far above the closest-points algorithm's error (~1e-6 m).
 FAR_MARGIN = 0.05
 
 #: The links of a group: a set of PyBullet link indices, or None for every link of the body.
@@ -166,7 +166,16 @@ class ClosestPoints:
         """The smallest axis-aligned box [m] holding PyBullet's boxes (``getAABB``) of every
         link of ``body`` with a collision shape, now: (lower corner, upper corner)."""
         lo, hi = [math.inf] * 3, [-math.inf] * 3
-        for link in self._links(body):
+        links = self._links(body)
+        if links and links[-1] >= 0:
+            # PyBullet's link boxes use the link transforms of its last forward kinematics,
+            # which a physics step makes before it moves the links (its collision shapes are
+            # moved after): one forward kinematics from the current joints first, the same
+            # arithmetic as the shapes' transforms. (It changes no state a step reads: the
+            # next step makes its own before it uses them.)
+            p.getLinkState(body, links[-1], computeForwardKinematics=True,
+                           physicsClientId=self.client)
+        for link in links:
             a, b = p.getAABB(body, link, physicsClientId=self.client)
             for i in range(3):
                 if a[i] < lo[i]:
