@@ -349,3 +349,39 @@ def sc_camera():  # type: ignore[no-untyped-def]
     from repro.sensors.camera import Camera
 
     return Camera(sc.INTRINSICS, mode="exact")
+
+
+def test_position_reference_substeps_send_what_the_numpy_form_sends(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """PositionReferenceDrive's PD substeps (quintic and clip in Python floats) against the
+    numpy form (quintic_reference, np.clip, tolist), joint by joint, over commands that
+    saturate, stand still (zeros of both signs) and move."""
+    from repro.sim.drives import PositionReferenceDrive
+    from repro.sim.crs_a465 import CRS_JOINTS, CRS_LIMITS, crs_urdf_path
+    from repro.sim.robot import Robot
+
+    with World(WorldConfig(physics_dt=1e-3, control_dt=1e-3)) as world:
+        robot = Robot(world, crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
+        drive = PositionReferenceDrive(robot, "pd")
+        sent: list[tuple[list[float], list[float]]] = []
+        real = p.setJointMotorControlArray
+
+        def spy(*a, **kw):  # type: ignore[no-untyped-def]
+            if a[2] == p.POSITION_CONTROL:
+                sent.append((list(kw["targetPositions"]), list(kw["targetVelocities"])))
+            return real(*a, **kw)
+
+        monkeypatch.setattr(p, "setJointMotorControlArray", spy)
+        rng = np.random.default_rng(19)
+        qd_max = np.asarray(CRS_LIMITS.qd_max)
+        for k in range(200):
+            u = rng.normal(size=robot.n) * qd_max * (3.0 if k % 4 == 0 else 0.5)
+            if k % 5 == 0:
+                u = np.where(rng.random(robot.n) < 0.5, -0.0, 0.0)
+            q0, v0 = drive.q_ref.copy(), drive.v_ref.copy()
+            drive.command(u, 2e-3)  # a 2 ms period: substeps at t = h and 2h
+            for i in (1, 2):
+                drive.substep(i, 1e-3)
+                qr, vr = quintic_reference(q0, v0, drive.q_ref, drive.v_ref, 2e-3, i * 1e-3)
+                vr = np.clip(vr, -qd_max, qd_max)
+                assert _same(sent[-1][0], qr) and _same(sent[-1][1], vr)

@@ -20,9 +20,19 @@ def quintic(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, T: f
     numpy's element-wise form (:func:`quintic_reference`, to the bit; a scalar ``s**k`` is
     libm's ``pow`` in both), without numpy's per-call overhead on a 7-vector at 1 kHz.
     """
-    T = float(T)
-    if not T > 0.0:  # (a zero period divides by zero: numpy's inf/NaN, as before)
+    got = quintic_lists(q0, v0, q1, v1, T, t)
+    if got is None:  # (a zero period divides by zero: numpy's inf/NaN, as before)
         return quintic_reference(q0, v0, q1, v1, T, t)
+    return np.array(got[0]), np.array(got[1])
+
+
+def quintic_lists(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, T: float,
+                  t: float) -> tuple[list[float], list[float]] | None:
+    """:func:`quintic` as lists of Python floats (for a caller that sends them on); None
+    when ``T`` is not > 0."""
+    T = float(T)
+    if not T > 0.0:
+        return None
     s = min(max(float(t), 0.0), T)  # np.clip's value
     s2, s3, s4, s5 = s**2, s**3, s**4, s**5
     d3, d4, d5 = 2 * T**3, 2 * T**4, 2 * T**5
@@ -39,7 +49,7 @@ def quintic(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, T: f
         c5 = (12 * h - 6 * (b1 + c1) * T) / d5
         q.append(c0 + c1 * s + c2 * s2 + c3 * s3 + c4 * s4 + c5 * s5)
         qd.append(c1 + 2 * c2 * s + 3 * c3 * s2 + 4 * c4 * s3 + 5 * c5 * s4)
-    return np.array(q), np.array(qd)
+    return q, qd
 
 
 def quintic_reference(q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray,

@@ -165,7 +165,6 @@ class ClosestPoints:
     def box(self, body: int) -> tuple[list[float], list[float]]:
         """The smallest axis-aligned box [m] holding PyBullet's boxes (``getAABB``) of every
         link of ``body`` with a collision shape, now: (lower corner, upper corner)."""
-        lo, hi = [math.inf] * 3, [-math.inf] * 3
         links = self._links(body)
         if links and links[-1] >= 0:
             # PyBullet's link boxes use the link transforms of its last forward kinematics,
@@ -175,13 +174,14 @@ class ClosestPoints:
             # next step makes its own before it uses them.)
             p.getLinkState(body, links[-1], computeForwardKinematics=True,
                            physicsClientId=self.client)
-        for link in links:
-            a, b = p.getAABB(body, link, physicsClientId=self.client)
-            for i in range(3):
-                if a[i] < lo[i]:
-                    lo[i] = a[i]
-                if b[i] > hi[i]:
-                    hi[i] = b[i]
+        if not links:
+            return [math.inf] * 3, [-math.inf] * 3
+        aabb, client = p.getAABB, self.client
+        boxes = [aabb(body, link, physicsClientId=client) for link in links]
+        lo = [min(c) for c in zip(*(b[0] for b in boxes))]
+        hi = [max(c) for c in zip(*(b[1] for b in boxes))]
+        if not all(map(math.isfinite, lo + hi)):  # (never a proof from a broken box)
+            return [-math.inf] * 3, [math.inf] * 3
         return lo, hi
 
 

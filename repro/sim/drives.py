@@ -25,7 +25,7 @@ from typing import Protocol
 import numpy as np
 import pybullet as p
 
-from repro.control.interpolation import quintic
+from repro.control.interpolation import quintic, quintic_lists
 from repro.errors import UnknownChoiceError
 from repro.sim.robot import JointSet
 
@@ -116,6 +116,7 @@ class PositionReferenceDrive:
         #: no bound is zero (the two differ on a zero's sign only)
         self._clip_qd = (_nonzero_clip(self._qd_min, self.qd_max)
                          if bool(np.all(self.qd_max > 0.0)) else None)
+        self._qd_lo, self._qd_hi = self._qd_min.tolist(), self.qd_max.tolist()
         self.q_min = np.asarray(robot.limits.q_min, dtype=float)
         self.q_max = np.asarray(robot.limits.q_max, dtype=float)
         self.q_ref = robot.q()
@@ -133,6 +134,14 @@ class PositionReferenceDrive:
 
     def substep(self, i: int, h: float) -> None:
         q0, v0 = self._from
+        if self.inner == "pd" and self._clip_qd is not None:
+            got = quintic_lists(q0, v0, self.q_ref, self.v_ref, self._dt, i * h)
+            if got is not None:  # in Python floats: the same values as below
+                qr_l, vr_l = got
+                vr_l = [min(max(v, lo), hi)  # np.clip's, no bound being zero
+                        for v, lo, hi in zip(vr_l, self._qd_lo, self._qd_hi, strict=True)]
+                self.robot.set_position_command(qr_l, vr_l, position_gain=self.gain)
+                return
         qr, vr = quintic(q0, v0, self.q_ref, self.v_ref, self._dt, i * h)
         vr = (np.clip(vr, -self.qd_max, self.qd_max) if self._clip_qd is None
               else self._clip_qd(vr))

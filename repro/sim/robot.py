@@ -132,7 +132,8 @@ class JointSet:
             physicsClientId=self.client,
         )
 
-    def set_position_command(self, q_ref: np.ndarray, qd_ref: np.ndarray,
+    def set_position_command(self, q_ref: np.ndarray | list[float],
+                             qd_ref: np.ndarray | list[float],
                              position_gain: float = 0.2, velocity_gain: float = 1.0) -> None:
         """Track a joint reference with PyBullet's joint PD (position control) [rad, rad/s].
 
@@ -142,8 +143,10 @@ class JointSet:
         """
         p.setJointMotorControlArray(
             self.body, self.pb_joints, p.POSITION_CONTROL,
-            targetPositions=np.asarray(q_ref, dtype=float).tolist(),
-            targetVelocities=np.asarray(qd_ref, dtype=float).tolist(),
+            targetPositions=(q_ref if type(q_ref) is list
+                             else np.asarray(q_ref, dtype=float).tolist()),
+            targetVelocities=(qd_ref if type(qd_ref) is list
+                              else np.asarray(qd_ref, dtype=float).tolist()),
             positionGains=[position_gain] * self.n, velocityGains=[velocity_gain] * self.n,
             forces=list(self.limits.tau_max), physicsClientId=self.client,
         )
