@@ -178,8 +178,8 @@ class ClosestPoints:
             return [math.inf] * 3, [-math.inf] * 3
         aabb, client = p.getAABB, self.client
         boxes = [aabb(body, link, physicsClientId=client) for link in links]
-        lo = [min(c) for c in zip(*(b[0] for b in boxes))]
-        hi = [max(c) for c in zip(*(b[1] for b in boxes))]
+        lo = [min(c) for c in zip(*(b[0] for b in boxes), strict=True)]
+        hi = [max(c) for c in zip(*(b[1] for b in boxes), strict=True)]
         if not all(map(math.isfinite, lo + hi)):  # (never a proof from a broken box)
             return [-math.inf] * 3, [math.inf] * 3
         return lo, hi
