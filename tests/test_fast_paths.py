@@ -356,8 +356,8 @@ def test_position_reference_substeps_send_what_the_numpy_form_sends(
     """PositionReferenceDrive's PD substeps (quintic and clip in Python floats) against the
     numpy form (quintic_reference, np.clip, tolist), joint by joint, over commands that
     saturate, stand still (zeros of both signs) and move."""
-    from repro.sim.drives import PositionReferenceDrive
     from repro.sim.crs_a465 import CRS_JOINTS, CRS_LIMITS, crs_urdf_path
+    from repro.sim.drives import PositionReferenceDrive
     from repro.sim.robot import Robot
 
     with World(WorldConfig(physics_dt=1e-3, control_dt=1e-3)) as world:
