@@ -166,3 +166,32 @@ def test_the_robot_box_holds_its_shapes_while_the_physics_moves_it(scene: Scene)
                                                   physicsClientId=client))
         lo, hi = p.getAABB(bid, -1, physicsClientId=client)
         assert _box_gap(cp.box(robot.body), lo, hi) <= d + 1e-9
+
+
+def test_a_kept_robot_box_grown_by_the_joint_motion_holds_the_fresh_box(scene: Scene) -> None:
+    """moving_box along a random walk of the joints (small steps, some jumps, through the
+    physics and through resets): it always contains the box made afresh at the same joints,
+    it is made again only now and then, and the distances with it are the full query's."""
+    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
+    scene.add_capsule("limb", 0.05, 0.3, _pose(np.array([1.9, 0.0, 0.5])), (1, 0, 0, 1),
+                      moving=True)
+    bid = scene["limb"].ids[0]
+    groups = (None,)
+    cp, fresh = ClosestPoints(scene.physics.client), ClosestPoints(scene.physics.client)
+    rng = np.random.default_rng(23)
+    q = robot.q()
+    made = 0
+    for k in range(300):
+        q = q + rng.normal(0.0, 0.5 if k % 50 == 49 else 3e-4, q.shape)  # ~0.3 rad/s
+        robot.reset(q)
+        before = len(cp._moving) and cp._moving[robot.body][3].copy()
+        lo, hi = cp.moving_box(robot.body, robot.pb_joints, robot.q())
+        made += not (len(cp._moving) and np.array_equal(before, cp._moving[robot.body][3]))
+        flo, fhi = fresh.box(robot.body)
+        assert all(lo[i] <= flo[i] and fhi[i] <= hi[i] for i in range(3)), k
+        scene.move("limb", _pose(np.array([rng.uniform(1.0, 2.6), rng.uniform(-0.5, 0.5),
+                                           0.5])))
+        got = cp.minima_of(robot.body, [bid], groups, DISTANCE_CAP,
+                           (robot.pb_joints, robot.q()))[0]
+        assert got == _brute(scene, robot.body, bid, groups, DISTANCE_CAP), k
+    assert 5 < made < 150 and cp.skipped > 20

@@ -39,9 +39,10 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
 import pybullet as p
 
-__all__ = ["FAR_MARGIN", "HINT_MARGIN", "ClosestPoints", "group_minima"]
+__all__ = ["BOX_SLACK", "FAR_MARGIN", "HINT_MARGIN", "ClosestPoints", "group_minima"]
 
 #: Added to the previous query's largest group minimum to get the next threshold [m].
 #: ours: a speed rule, not a value rule (any margin gives the same distances): 1 cm is
@@ -52,6 +53,10 @@ HINT_MARGIN = 0.01
 #: apart than the cap plus this [m]. ours: a speed rule, not a value rule (a body it does
 #: not skip is asked): 5 cm is far above the closest-points algorithm's error (~1e-6 m).
 FAR_MARGIN = 0.05
+#: How far a kept box of a robot may be grown by its joints' motion before it is made again
+#: [m]. ours: a speed rule, not a value rule (a grown box only proves less): 5 cm keeps
+#: the far test nearly as tight as a fresh box and is made again every few tens of steps.
+BOX_SLACK = 0.05
 
 #: The links of a group: a set of PyBullet link indices, or None for every link of the body.
 Links = frozenset[int] | None
@@ -103,6 +108,11 @@ class ClosestPoints:
         self._hint: dict[tuple[int, tuple[Links, ...]], dict[int, float]] = {}
         self._members: dict[tuple[Links, ...], _Members] = {}
         self._shaped: dict[int, list[int]] = {}  # body -> its links with collision shapes
+        #: body -> (joints, box lower, box upper, q_ref, revolute mask, r) of moving_box
+        self._moving: dict[int, tuple[tuple[int, ...], list[float], list[float], np.ndarray,
+                                      np.ndarray, float]] = {}
+        self._kinds: dict[int, dict[int, bool] | None] = {}
+        self._single: dict[int, bool] = {}
         self.queries = 0  # getClosestPoints calls made (for tests and benchmarks)
         self.skipped = 0  # pairs proved beyond the cap by their boxes (no query)
 
@@ -114,9 +124,14 @@ class ClosestPoints:
         return self.minima_of(body_a, (body_b,), groups, cap)[0]
 
     def minima_of(self, body_a: int, bodies_b: Sequence[int], groups: tuple[Links, ...],
-                  cap: float) -> list[list[float]]:
+                  cap: float, joints_a: tuple[Sequence[int], np.ndarray] | None = None
+                  ) -> list[list[float]]:
         """:meth:`minima` of ``body_a`` against each of ``bodies_b`` in turn (the runner's
-        every-step form: the groups' membership and the hints found once for all)."""
+        every-step form: the groups' membership and the hints found once for all).
+        ``joints_a``: the PyBullet indices of every movable joint of ``body_a`` (a fixed-base
+        body) and their positions now, if the caller has them: then A's box is kept between
+        steps and grown by how far the joints can have moved its shapes
+        (:meth:`moving_box`), instead of being asked of PyBullet at every step."""
         key = (body_a, groups)
         hints = self._hint.get(key)
         if hints is None:
@@ -125,16 +140,22 @@ class ClosestPoints:
         if members is None:
             members = self._members[groups] = _Members(groups)
         ask, client = p.getClosestPoints, self.client
-        box_a: tuple[list[float], list[float]] | None = None
+        box_a: tuple[float, ...] | None = None
+        far2 = (cap + FAR_MARGIN) ** 2  # a squared gap beyond this: no shape within the cap
         out = []
         for body_b in bodies_b:
             threshold = hints.get(body_b, cap)
-            if threshold >= cap and body_b in hints:  # beyond the cap at the last query
+            if threshold >= cap and body_b in hints and self._one_link(body_b):
+                # beyond the cap at the last query: are the boxes still far apart?
                 if box_a is None:
-                    box_a = self.box(body_a)
-                lo, hi = p.getAABB(body_b, -1, physicsClientId=client)
-                if (len(self._links(body_b)) == 1
-                        and _box_gap(box_a, lo, hi) > cap + FAR_MARGIN):
+                    lo_a, hi_a = (self.box(body_a) if joints_a is None
+                                  else self.moving_box(body_a, *joints_a))
+                    box_a = (*lo_a, *hi_a)
+                (x0, y0, z0), (x1, y1, z1) = p.getAABB(body_b, -1, physicsClientId=client)
+                gx = max(x0 - box_a[3], box_a[0] - x1, 0.0)
+                gy = max(y0 - box_a[4], box_a[1] - y1, 0.0)
+                gz = max(z0 - box_a[5], box_a[2] - z1, 0.0)
+                if gx * gx + gy * gy + gz * gz > far2:  # (_box_gap > cap + FAR_MARGIN)
                     self.skipped += 1
                     out.append([cap] * members.n)
                     continue  # (the hint stays: cap + HINT_MARGIN)
@@ -152,6 +173,13 @@ class ClosestPoints:
             out.append(mins)
         return out
 
+    def _one_link(self, body: int) -> bool:
+        """``body`` has a single link with a collision shape, its base (found once)."""
+        got = self._single.get(body)
+        if got is None:
+            got = self._single[body] = self._links(body) == [-1]
+        return got
+
     def _links(self, body: int) -> list[int]:
         """The links of ``body`` with a collision shape (-1: the base), found once."""
         got = self._shaped.get(body)
@@ -161,6 +189,63 @@ class ClosestPoints:
                 link for link in range(-1, n)
                 if p.getCollisionShapeData(body, link, physicsClientId=self.client)]
         return got
+
+    def moving_box(self, body: int, joints: Sequence[int], q: np.ndarray
+                   ) -> tuple[list[float], list[float]]:
+        """A box [m] holding every collision shape of the fixed-base ``body`` whose movable
+        joints (PyBullet indices ``joints``: all of them) are at ``q`` now: the :meth:`box`
+        made at some earlier ``q_ref``, grown by a bound ``D`` on how far any of its points
+        can have moved since, and made again when ``D`` would exceed :data:`BOX_SLACK`.
+
+        The bound: move the joints to ``q`` one at a time. Turning a revolute joint by
+        ``d`` moves a point by at most ``|d|`` times its distance to the joint's axis, which
+        is at most ``r + 2 D`` (``r``: the diagonal of a box holding the shapes and every
+        joint origin at ``q_ref``; both the point and the axis have moved by <= ``D``); a
+        prismatic joint moves it by ``|d|``. Summed: ``D (1 - 2 S) <= S r + P`` with ``S``,
+        ``P`` the sums of ``|q - q_ref|`` over revolute and prismatic joints. Any other
+        joint kind, or joints that are not all of the body's, and the box is made every
+        time."""
+        q = np.asarray(q, dtype=float)
+        got = self._moving.get(body)
+        if got is not None and got[0] == tuple(joints):
+            _, lo, hi, q_ref, revolute, r = got
+            d = np.abs(q - q_ref)
+            S, P = float(d[revolute].sum()), float(d[~revolute].sum())
+            if 2.0 * S < 0.5 and math.isfinite(S + P):
+                D = (S * r + P) / (1.0 - 2.0 * S)
+                if D <= BOX_SLACK:
+                    return [v - D for v in lo], [v + D for v in hi]
+        kinds = self._joint_kinds(body)
+        lo, hi = self.box(body)
+        if (kinds is None or sorted(joints) != sorted(kinds) or q.shape != (len(joints),)
+                or not all(map(math.isfinite, lo + hi))):
+            return lo, hi  # (no bound: made every time)
+        n = p.getNumJoints(body, physicsClientId=self.client)
+        origins = [st[4] for st in p.getLinkStates(body, list(range(n)),
+                                                   physicsClientId=self.client)]
+        base = p.getBasePositionAndOrientation(body, physicsClientId=self.client)[0]
+        pts = [*origins, base, lo, hi]
+        r = math.dist([min(c) for c in zip(*pts, strict=True)],
+                      [max(c) for c in zip(*pts, strict=True)])
+        revolute = np.array([kinds[j] for j in joints])
+        self._moving[body] = (tuple(joints), lo, hi, q.copy(), revolute, r)
+        return lo, hi
+
+    def _joint_kinds(self, body: int) -> dict[int, bool] | None:
+        """Movable joint index -> revolute (True) or prismatic (False); None when the body
+        has another kind (spherical, planar). Found once."""
+        if body not in self._kinds:
+            kinds: dict[int, bool] | None = {}
+            for j in range(p.getNumJoints(body, physicsClientId=self.client)):
+                kind = p.getJointInfo(body, j, physicsClientId=self.client)[2]
+                if kind == p.JOINT_FIXED:
+                    continue
+                if kind not in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC) or kinds is None:
+                    kinds = None
+                    continue
+                kinds[j] = kind == p.JOINT_REVOLUTE
+            self._kinds[body] = kinds
+        return self._kinds[body]
 
     def box(self, body: int) -> tuple[list[float], list[float]]:
         """The smallest axis-aligned box [m] holding PyBullet's boxes (``getAABB``) of every

@@ -536,7 +536,9 @@ class Scene:
         minima_of = self._closest.minima_of
         for full, idx, groups in plan[1]:
             names, ids, spans = self._others(full)
-            per_body = minima_of(full.body, ids, groups, cap)  # [id][group]
+            # the chain's joints now (its box is then kept between steps: ClosestPoints)
+            joints = (full.pb_joints, full.q()) if isinstance(full, Robot) else None
+            per_body = minima_of(full.body, ids, groups, cap, joints)  # [id][group]
             if spans is None:  # one PyBullet body per scene body
                 values = [list(col) for col in zip(*per_body, strict=True)] if per_body else [
                     [] for _ in idx]
