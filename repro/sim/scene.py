@@ -479,8 +479,13 @@ class Scene:
             raise ConfigError(f"body {name!r} was not added with moving=True")
         T_world = np.asarray(T_world, dtype=float)
         old = body.T_world
-        if T_world.tobytes() == old.tobytes() or (
-                T_world.shape == old.shape and T_world.tolist() == old.tolist()):
+        if T_world.shape == old.shape == (4, 4):
+            a, b = float(T_world[0, 3]), float(old[0, 3])
+            moved = a != b and a == a and b == b  # two numbers: neither the same bits nor values
+        else:
+            moved = False
+        if not moved and (T_world.tobytes() == old.tobytes() or (
+                T_world.shape == old.shape and T_world.tolist() == old.tolist())):
             return  # where it is: resetting a body to its own pose changes nothing
         _place(self.physics.client, body.ids, body, T_world)
         if body.render_ids:
