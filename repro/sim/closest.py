@@ -205,7 +205,9 @@ class ClosestPoints:
         prismatic joint moves it by ``|d|``. Summed: ``D (1 - 2 S) <= S r + P`` with ``S``,
         ``P`` the sums of ``|q - q_ref|`` over revolute and prismatic joints. Any other
         joint kind, or joints that are not all of the body's, and the box is made every
-        time."""
+        time. ``q`` must be the joints' positions now (the runner passes the joint states
+        it reads at every step: :class:`repro.sim.robot.Robot`'s, renewed by every physics
+        step and reset)."""
         q = np.asarray(q, dtype=float)
         got = self._moving.get(body)
         if got is not None and got[0] == tuple(joints):
