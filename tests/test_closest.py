@@ -131,13 +131,13 @@ def test_bodies_beyond_the_cap_are_proved_so_by_boxes(scene: Scene) -> None:
                 scene, robot.body, bid, groups, DISTANCE_CAP)
     assert cp.skipped > 30 and cp.queries > 100  # both ways taken
     # the box test itself: PyBullet's link boxes hold the closest points of every link
-    lo, hi = cp.box(robot.body)
+    lo, hi = cp.boxes.box(robot.body)
     for pt in p.getClosestPoints(robot.body, bid, 10.0, physicsClientId=scene.physics.client):
         assert all(lo[i] - 1e-9 <= pt[5][i] <= hi[i] + 1e-9 for i in range(3))
 
 
 def test_the_box_gap_is_the_distance_between_boxes() -> None:
-    from repro.sim.closest import _box_gap
+    from repro.sim.link_boxes import box_gap as _box_gap
 
     box = ([0.0, 0.0, 0.0], [1.0, 1.0, 1.0])
     assert _box_gap(box, [0.5, 0.5, 0.5], [2.0, 2.0, 2.0]) == 0.0  # overlapping
@@ -154,7 +154,7 @@ def test_the_robot_box_holds_its_shapes_while_the_physics_moves_it(scene: Scene)
     p.setGravity(0.0, 0.0, 0.0, physicsClientId=client)
     p.setJointMotorControl2(robot.body, robot.pb_joints[0], p.VELOCITY_CONTROL,
                             targetVelocity=20.0, force=1e6, physicsClientId=client)
-    from repro.sim.closest import _box_gap
+    from repro.sim.link_boxes import box_gap as _box_gap
 
     cp = ClosestPoints(client)
     for k, xyz in enumerate([(0.45, 0.1, 0.5), (0.9, -0.2, 0.3), (1.5, 0.0, 0.8)] * 20):
@@ -165,7 +165,7 @@ def test_the_robot_box_holds_its_shapes_while_the_physics_moves_it(scene: Scene)
         d = min(pt[8] for pt in p.getClosestPoints(robot.body, bid, 10.0,
                                                   physicsClientId=client))
         lo, hi = p.getAABB(bid, -1, physicsClientId=client)
-        assert _box_gap(cp.box(robot.body), lo, hi) <= d + 1e-9
+        assert _box_gap(cp.boxes.box(robot.body), lo, hi) <= d + 1e-9
 
 
 def test_a_kept_robot_box_grown_by_the_joint_motion_holds_the_fresh_box(scene: Scene) -> None:
@@ -184,10 +184,11 @@ def test_a_kept_robot_box_grown_by_the_joint_motion_holds_the_fresh_box(scene: S
     for k in range(300):
         q = q + rng.normal(0.0, 0.5 if k % 50 == 49 else 3e-4, q.shape)  # ~0.3 rad/s
         robot.reset(q)
-        before = len(cp._moving) and cp._moving[robot.body][3].copy()
-        lo, hi = cp.moving_box(robot.body, robot.pb_joints, robot.q())
-        made += not (len(cp._moving) and np.array_equal(before, cp._moving[robot.body][3]))
-        flo, fhi = fresh.box(robot.body)
+        kept = cp.boxes._moving
+        before = len(kept) and kept[robot.body][3].copy()
+        lo, hi = cp.boxes.moving_box(robot.body, robot.pb_joints, robot.q())
+        made += not (len(kept) and np.array_equal(before, kept[robot.body][3]))
+        flo, fhi = fresh.boxes.box(robot.body)
         assert all(lo[i] <= flo[i] and fhi[i] <= hi[i] for i in range(3)), k
         scene.move("limb", _pose(np.array([rng.uniform(1.0, 2.6), rng.uniform(-0.5, 0.5),
                                            0.5])))
