@@ -301,7 +301,7 @@ def test_vvs_pinv_is_numpy_s_to_the_bit() -> None:
 
 def test_drive_clips_equal_np_clip_and_torques_are_set_torque_command_s(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    from repro.sim.drives import TorqueDrive, _nonzero_clip
+    from repro.sim.drives import TorqueDrive, clip_nonzero
     from repro.sim.pa10 import ALL_JOINTS, ALL_LIMITS, pa10_urdf_path
     from repro.sim.robot import Robot
 
@@ -312,7 +312,7 @@ def test_drive_clips_equal_np_clip_and_torques_are_set_torque_command_s(
         pick = rng.integers(0, 6, 7)
         x = np.where(pick == 0, hi, np.where(pick == 1, -hi, np.where(
             pick == 2, -0.0, np.where(pick == 3, np.nan, x))))
-        assert _same(_nonzero_clip(-hi, hi)(x), np.clip(x, -hi, hi))
+        assert _same(clip_nonzero(x, -hi, hi), np.clip(x, -hi, hi))
     with World(WorldConfig(physics_dt=1e-3, control_dt=1e-3)) as world:
         robot = Robot(world, pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS)
         drive = TorqueDrive(robot)

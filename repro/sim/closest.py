@@ -43,7 +43,7 @@ from collections.abc import Sequence
 import numpy as np
 import pybullet as p
 
-from repro.sim.link_boxes import LinkBoxes
+from repro.sim.link_boxes import LinkBoxes, box_gap
 
 __all__ = ["FAR_MARGIN", "HINT_MARGIN", "ClosestPoints", "group_minima"]
 
@@ -135,22 +135,17 @@ class ClosestPoints:
         if members is None:
             members = self._members[groups] = _Members(groups)
         ask, client = p.getClosestPoints, self.client
-        box_a: tuple[float, ...] | None = None
-        far2 = (cap + FAR_MARGIN) ** 2  # a squared gap beyond this: no shape within the cap
+        box_a: tuple[list[float], list[float]] | None = None
         out = []
         for body_b in bodies_b:
             threshold = hints.get(body_b, cap)
             if threshold >= cap and body_b in hints and self.boxes.one_link(body_b):
                 # beyond the cap at the last query: are the boxes still far apart?
                 if box_a is None:
-                    lo_a, hi_a = (self.boxes.box(body_a) if joints_a is None
-                                  else self.boxes.moving_box(body_a, *joints_a))
-                    box_a = (*lo_a, *hi_a)
-                (x0, y0, z0), (x1, y1, z1) = p.getAABB(body_b, -1, physicsClientId=client)
-                gx = max(x0 - box_a[3], box_a[0] - x1, 0.0)
-                gy = max(y0 - box_a[4], box_a[1] - y1, 0.0)
-                gz = max(z0 - box_a[5], box_a[2] - z1, 0.0)
-                if gx * gx + gy * gy + gz * gz > far2:  # (_box_gap > cap + FAR_MARGIN)
+                    box_a = (self.boxes.box(body_a) if joints_a is None
+                             else self.boxes.moving_box(body_a, *joints_a))
+                lo, hi = p.getAABB(body_b, -1, physicsClientId=client)
+                if box_gap(box_a, lo, hi) > cap + FAR_MARGIN:  # no shape within the cap
                     self.skipped += 1
                     out.append([cap] * members.n)
                     continue  # (the hint stays: cap + HINT_MARGIN)

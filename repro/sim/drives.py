@@ -19,7 +19,6 @@ and never gets more than ``tau_max``.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -80,13 +79,11 @@ class VelocityDrive:
         return np.zeros(self.robot.n)
 
 
-def _nonzero_clip(lo: np.ndarray, hi: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-    """``x -> np.clip(x, lo, hi)`` for bounds with no zero (NaN propagates as in np.clip),
-    without np.clip's wrapper: the same values (they differ only on a zero bound, where
-    np.clip gives +0.0 and np.maximum keeps -0.0)."""
-    def clip(x: np.ndarray) -> np.ndarray:
-        return np.minimum(np.maximum(x, lo), hi)
-    return clip
+def clip_nonzero(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """``np.clip(x, lo, hi)`` for bounds with no zero (NaN propagates as in np.clip), without
+    np.clip's wrapper: the same values (the two differ only on a zero bound, where np.clip
+    gives +0.0 and np.maximum keeps -0.0)."""
+    return np.minimum(np.maximum(x, lo), hi)
 
 
 class PositionReferenceDrive:
@@ -111,12 +108,10 @@ class PositionReferenceDrive:
             raise UnknownChoiceError("inner loop", inner, self.INNER)
         self.robot, self.inner, self.gain = robot, inner, position_gain
         self.qd_max = np.asarray(robot.limits.qd_max, dtype=float)
-        self._qd_min = -self.qd_max
-        #: np.clip(x, -qd_max, qd_max) as np.minimum(np.maximum(...)): the same values when
-        #: no bound is zero (the two differ on a zero's sign only)
-        self._clip_qd = (_nonzero_clip(self._qd_min, self.qd_max)
-                         if bool(np.all(self.qd_max > 0.0)) else None)
-        self._qd_lo, self._qd_hi = self._qd_min.tolist(), self.qd_max.tolist()
+        #: no velocity bound is zero: the clips to +-qd_max may skip np.clip's wrapper
+        #: (clip_nonzero, or min/max of Python floats), with the same values
+        self._fast_clip = bool(np.all(self.qd_max > 0.0))
+        self._qd_bounds = list(zip((-self.qd_max).tolist(), self.qd_max.tolist(), strict=True))
         self.q_min = np.asarray(robot.limits.q_min, dtype=float)
         self.q_max = np.asarray(robot.limits.q_max, dtype=float)
         self.q_ref = robot.q()
@@ -125,26 +120,30 @@ class PositionReferenceDrive:
         self._dt = 0.0
 
     def command(self, u: np.ndarray, dt: float) -> np.ndarray:
-        qd = (np.clip(np.asarray(u, dtype=float), -self.qd_max, self.qd_max)
-              if self._clip_qd is None else self._clip_qd(np.asarray(u, dtype=float)))
+        qd = self._clip_qd(np.asarray(u, dtype=float))
         target = np.clip(self.q_ref + dt * qd, self.q_min, self.q_max)
         self._from = (self.q_ref, self.v_ref)
         self.q_ref, self.v_ref, self._dt = target, qd, dt
         return qd
 
+    def _clip_qd(self, qd: np.ndarray) -> np.ndarray:
+        """``qd`` clipped to +-qd_max [rad/s] (np.clip's values)."""
+        if self._fast_clip:
+            return clip_nonzero(qd, -self.qd_max, self.qd_max)
+        return np.clip(qd, -self.qd_max, self.qd_max)
+
     def substep(self, i: int, h: float) -> None:
         q0, v0 = self._from
-        if self.inner == "pd" and self._clip_qd is not None:
+        if self.inner == "pd" and self._fast_clip:
             got = quintic_lists(q0, v0, self.q_ref, self.v_ref, self._dt, i * h)
             if got is not None:  # in Python floats: the same values as below
                 qr_l, vr_l = got
                 vr_l = [min(max(v, lo), hi)  # np.clip's, no bound being zero
-                        for v, lo, hi in zip(vr_l, self._qd_lo, self._qd_hi, strict=True)]
+                        for v, (lo, hi) in zip(vr_l, self._qd_bounds, strict=True)]
                 self.robot.set_position_command(qr_l, vr_l, position_gain=self.gain)
                 return
         qr, vr = quintic(q0, v0, self.q_ref, self.v_ref, self._dt, i * h)
-        vr = (np.clip(vr, -self.qd_max, self.qd_max) if self._clip_qd is None
-              else self._clip_qd(vr))
+        vr = self._clip_qd(vr)
         if self.inner == "pd":
             self.robot.set_position_command(qr, vr, position_gain=self.gain)
             return

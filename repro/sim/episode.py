@@ -26,6 +26,7 @@ equations and nothing else. The runner owns everything else, identically for eve
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -376,6 +377,14 @@ class _Audit:
                 "controller_used_wrong_feature": self.mismatch_rows > 0}
 
 
+def _missed_cause(camera: Camera, Z: float, uv: np.ndarray, visible: bool, c: np.ndarray,
+                  P: np.ndarray, normal: np.ndarray) -> str:
+    """:func:`_why_missed` of a dot at depth ``Z`` [m] whose centre projects to ``uv``
+    (1, 2) [px]."""
+    return _why_missed(bool(Z > 0 and camera.intrinsics.in_image(uv)[0]), visible, c, P,
+                       normal)
+
+
 def _why_missed(in_view: bool, visible: bool, c: np.ndarray, P: np.ndarray,
                 normal: np.ndarray) -> str:
     """Ground-truth cause of a missed detection (for the feature_missed event)."""
@@ -460,14 +469,17 @@ class _Runner:
         #: their running minima
         self._dist_cols: dict[tuple[str, tuple[str, ...]], _DistanceColumns] = {}
 
-    def onset(self, key: str, now: bool, t: float, k: int, kind: str, detail: str,
-              end_detail: str | None = None) -> None:
-        """Log an event when a condition starts (and optionally when it ends)."""
+    def onset(self, key: str, now: bool, t: float, k: int, kind: str,
+              detail: str | Callable[[], str],
+              end_detail: str | Callable[[], str] | None = None) -> None:
+        """Log an event when a condition starts (and optionally when it ends). A text may be
+        given as a function: it is formatted only when its event is logged."""
         was = self._flags.get(key, False)
         if now and not was:
-            self.rec.event(t, k, kind, detail)
+            self.rec.event(t, k, kind, detail if isinstance(detail, str) else detail())
         elif was and not now and end_detail is not None:
-            self.rec.event(t, k, kind + "_end", end_detail)
+            self.rec.event(t, k, kind + "_end",
+                           end_detail if isinstance(end_detail, str) else end_detail())
         self._flags[key] = now
 
     def measure(self, cam: CameraRig, q: np.ndarray, t: float, k: int
@@ -492,8 +504,6 @@ class _Runner:
         target = body.dot_target
         assert target is not None
         T_wc = cam.pose(q)
-        if getattr(cam.camera, "last_projection", None) is not None:
-            cam.camera.last_projection = None  # (a camera that does not keep it: not stale)
         tic = time.perf_counter()
         uv, found, Z = cam.camera.measure(scene.render_client, T_wc, target, body.T_world)
         row[f"{cam.name}_render_s"] = time.perf_counter() - tic
@@ -543,31 +553,31 @@ class _Runner:
                 a.points_mismatched.add(j)
             if hidden[i]:
                 a.points_hidden_found.add(j)
-            # an event only where a condition starts or ends (its text formatted then)
-            flags = self._flags
-            key, now = f"{s}_mismatch", bool(bad[i])
-            if now != flags.get(key, False):
-                self.onset(key, now, t, k, "feature_mismatch",
-                           f"{cam.name} point {j} detected {err[i]:.1f} px from the "
-                           f"projection of its model point (tolerance {cam.tol_px} px)",
-                           f"{cam.name} point {j} back within {cam.tol_px} px")
-            key, now = f"{s}_missed", not found[i]
-            if now != flags.get(key, False):
-                cause = ""
-                if not found[i]:
-                    cause = _why_missed(bool(Z[i] > 0 and cam.camera.intrinsics.in_image(
-                        uv_true[i:i + 1])[0]), bool(visible[i]), T_wc[:3, 3], P[i],
-                        body.T_world[:3, 2])
-                self.onset(key, now, t, k, "feature_missed",
-                           f"audit: {cam.name} point {j} not detected; ground truth: {cause}",
-                           f"{cam.name} point {j} detected again")
-            key, now = f"{s}_hidden", bool(hidden[i])
-            if now != flags.get(key, False):
-                self.onset(key, now, t, k, "hidden_found",
-                           f"{cam.name} point {j} reported found but its model point is not "
-                           "visible (occluded or outside the image)",
-                           f"{cam.name} point {j} visible again or no longer found")
+            # the texts are formatted only when an event is logged (onset)
+            self._dot_events(cam, s, j, t, k, bool(bad[i]), not found[i], bool(hidden[i]),
+                             float(err[i]), functools.partial(
+                                 _missed_cause, cam.camera, Z[i], uv_true[i:i + 1],
+                                 bool(visible[i]), T_wc[:3, 3], P[i], body.T_world[:3, 2]))
         return Features(uv, found, Z)
+
+    def _dot_events(self, cam: CameraRig, s: str, j: int, t: float, k: int, bad: bool,
+                    missed: bool, hidden: bool, err_px: float, cause: Callable[[], str]
+                    ) -> None:
+        """The audit events of dot ``j`` (1-based, columns ``s``) of a frame: a detection
+        off its projection, a dot missed (with its ground-truth ``cause``), one found that
+        is not visible, each when it starts and when it ends."""
+        name, tol = cam.name, cam.tol_px
+        self.onset(f"{s}_mismatch", bad, t, k, "feature_mismatch",
+                   lambda: f"{name} point {j} detected {err_px:.1f} px from the projection "
+                   f"of its model point (tolerance {tol} px)",
+                   lambda: f"{name} point {j} back within {tol} px")
+        self.onset(f"{s}_missed", missed, t, k, "feature_missed",
+                   lambda: f"audit: {name} point {j} not detected; ground truth: {cause()}",
+                   lambda: f"{name} point {j} detected again")
+        self.onset(f"{s}_hidden", hidden, t, k, "hidden_found",
+                   lambda: f"{name} point {j} reported found but its model point is not "
+                   "visible (occluded or outside the image)",
+                   lambda: f"{name} point {j} visible again or no longer found")
 
     def ground_truth(self, t: float, k: int, row: dict[str, Scalar] | None) -> None:
         """Distances at every step (collision events, the minima over all steps); their

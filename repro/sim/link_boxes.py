@@ -39,14 +39,10 @@ class LinkBoxes:
         self._moving: dict[int, tuple[tuple[int, ...], list[float], list[float], np.ndarray,
                                       np.ndarray, float]] = {}
         self._kinds: dict[int, dict[int, bool] | None] = {}
-        self._single: dict[int, bool] = {}
 
     def one_link(self, body: int) -> bool:
-        """``body`` has a single link with a collision shape, its base (found once)."""
-        got = self._single.get(body)
-        if got is None:
-            got = self._single[body] = self.links(body) == [-1]
-        return got
+        """``body`` has a single link with a collision shape, its base."""
+        return self.links(body) == [-1]
 
     def links(self, body: int) -> list[int]:
         """The links of ``body`` with a collision shape (-1: the base), found once."""
@@ -81,6 +77,8 @@ class LinkBoxes:
             _, lo, hi, q_ref, revolute, r = got
             d = np.abs(q - q_ref)
             S, P = float(d[revolute].sum()), float(d[~revolute].sum())
+            # ours: S < 1/4 keeps 1 - 2S >= 1/2 (the bound at most doubles S r + P); a box
+            # moved that far is made again anyway (S r alone is ~BOX_SLACK at S ~ 0.03)
             if 2.0 * S < 0.5 and math.isfinite(S + P):
                 D = (S * r + P) / (1.0 - 2.0 * S)
                 if D <= BOX_SLACK:
