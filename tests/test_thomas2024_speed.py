@@ -1,12 +1,14 @@
 """The faster thomas2024 controller step (issue 15, item 4) computes what the previous code
-computed, to the bit: the committed traces must not change.
+computed, to the bit, but for the normal estimator (below).
 
 Each fast piece is compared with a verbatim copy of the code it replaced (the references
 below) or with the NumPy call it stands for, on seeded random data and on replayed states of
 the cases; timings are not tested (``make bench`` measures them).
 
-- the normal estimator of eqs. (3)-(4) (sums of eq. (4) without einsum, B^-1 b only where
-  the fit is well posed) and the interaction matrix of eqs. (2), (5), (6);
+- the interaction matrix of eqs. (2), (5), (6) (a compiled loop: the same IEEE operations);
+- the normal estimator of eqs. (3)-(4) is the exception: its compiled kernel (no LAPACK)
+  rounds differently from the NumPy/LAPACK code it replaced and agrees with it within
+  measured tolerances (case 2 was remade with it);
 - the controller's QP (10) (one Jacobian per link, ``ndarray.dot``, pixel normalisation),
   its dual stopping test, and the QP layer's cheaper checks (bounds, finiteness, the KKT
   check's reused buffers, DAQP's certified "solved").
@@ -81,8 +83,35 @@ def reference_ring_interaction_matrix(n_S: np.ndarray, delta: np.ndarray, r: flo
     return L
 
 
-class ReferenceEstimator(NormalEstimator):
-    """:class:`NormalEstimator` with the previous ``normals`` (einsum sums, pinv of every B)."""
+class ReferenceEstimator:
+    """The NumPy/LAPACK normal estimator the compiled kernel replaced (einsum sums of
+    eq. (4), LAPACK eigenvalues and pseudo-inverse of every B), verbatim but for names."""
+
+    def __init__(self, n_S: np.ndarray, radius: float, config: NormalEstimatorConfig) -> None:
+        self.n_S, self.radius, self.config = n_S, radius, config
+        self._past: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._current: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        m = n_S.shape[0]
+        self._held = np.full((m, 3), np.nan)
+        self.cond = np.full(m, np.nan)
+        self.spread = np.full(m, np.nan)
+        self.source = np.zeros(m, dtype=int)
+
+    def update(self, T_world_ring: np.ndarray, delta: np.ndarray, detected: np.ndarray) -> None:
+        if self._current is not None and self.config.history > 0:
+            if self._past is None:
+                self._past = (self._current[0][None], self._current[1][None],
+                              self._current[2][None])
+            elif len(self._past[0]) < self.config.history:
+                self._past = (np.concatenate((self._past[0], self._current[0][None])),
+                              np.concatenate((self._past[1], self._current[1][None])),
+                              np.concatenate((self._past[2], self._current[2][None])))
+            else:
+                for buf, new in zip(self._past, self._current, strict=True):
+                    buf[:-1] = buf[1:]
+                    buf[-1] = new
+        pts = (delta + self.radius)[:, None] * self.n_S
+        self._current = (T_world_ring.copy(), pts, detected.copy())
 
     def normals(self) -> np.ndarray:
         m = self.n_S.shape[0]
@@ -194,12 +223,25 @@ def _planes(rng: np.random.Generator) -> list[tuple[np.ndarray, float]]:
     return out
 
 
+#: Agreement of the compiled estimator with the LAPACK code (ReferenceEstimator), measured
+#: 2026-12-05 over the walks below and 20 more seeds (72000 sensor-steps, AMD EPYC): normals
+#: within 7.0e-11 (fits of cond(B) up to ~1e5 carry that rounding), spreads within 1.4e-8 m
+#: (a degenerate fit's lambda_min is rounding, ~1e-16 lambda_max, and its square root
+#: ~1e-8 m), cond(B) where below 1e8 within a relative 1.1e-8 (~eps cond), the same source
+#: for every sensor. Tolerances 10x those: a real change of the estimate (a 1 % gain, a
+#: flipped sign, one point more or less) moves a normal by >= 1e-4.
+NORMAL_TOL = 1e-9
+SPREAD_TOL = 1e-7  # [m]
+COND_REL_TOL = 1e-7  # where cond(B) < 1e8
+
+
 @pytest.mark.parametrize(("history", "neighbours", "noise", "seed"), [
     (15, 1, 0.0, 1), (15, 1, 0.002, 2), (5, 2, 0.002, 3), (30, 1, 0.0005, 4), (0, 1, 0.0, 5)])
-def test_normal_estimator_equals_the_previous_code_to_the_bit(
+def test_normal_estimator_agrees_with_the_lapack_code(
         history: int, neighbours: int, noise: float, seed: int) -> None:
     """Normals, cond(B), spreads, sources and the held (world) normals after every step of a
-    seeded random walk among three tilted planes, against the einsum-based code."""
+    seeded random walk among three tilted planes, against the NumPy/LAPACK code, within the
+    measured tolerances above."""
     rng = np.random.default_rng(seed)
     spec = RingSpec("ring2", sc.RING2_RADIUS, 18, 1.0, 0.0, 0.0, noise)
     cfg = NormalEstimatorConfig(history=history, neighbours=neighbours, range_noise=noise)
@@ -212,9 +254,16 @@ def test_normal_estimator_equals_the_previous_code_to_the_bit(
         for est in (fast, ref):
             est.update(T, delta, detected)
         got, want = fast.normals(), ref.normals()
-        assert same_bits(got, want)
-        for name in ("cond", "spread", "source", "_held"):
-            assert same_bits(getattr(fast, name), getattr(ref, name)), name
+        assert np.array_equal(fast.source, ref.source)
+        for a, b in ((got, want), (fast._held, ref._held)):
+            assert np.array_equal(np.isnan(a), np.isnan(b))
+            np.testing.assert_allclose(a, b, rtol=0.0, atol=NORMAL_TOL)
+        assert np.array_equal(np.isnan(fast.spread), np.isnan(ref.spread))
+        np.testing.assert_allclose(fast.spread, ref.spread, rtol=0.0, atol=SPREAD_TOL)
+        assert np.array_equal(np.isnan(fast.cond), np.isnan(ref.cond))
+        fit = ref.cond < 1e8
+        np.testing.assert_allclose(fast.cond[fit], ref.cond[fit], rtol=COND_REL_TOL)
+        assert np.all(fast.cond[~fit & ~np.isnan(ref.cond)] > 1e7)
         sources += np.bincount(fast.source, minlength=3)
     # the walk exercises every branch: fits used, normals held, sensors without any (with no
     # history every fit is of one scan, degenerate: none is used)
@@ -222,19 +271,26 @@ def test_normal_estimator_equals_the_previous_code_to_the_bit(
     assert (sources[SOURCE_FIT] > 0 and sources[SOURCE_HELD] > 0) == (history > 0)
 
 
-def test_pseudo_inverse_of_part_of_a_stack_is_that_part_of_its_pseudo_inverse() -> None:
-    """NormalEstimator.normals solves eq. (4) only where a fit is posed: np.linalg.pinv
-    (one LAPACK SVD per matrix) gives each matrix of a stack the same bits alone."""
-    rng = np.random.default_rng(7)
-    for _ in range(50):
-        s = int(rng.integers(1, 12))
-        P = rng.normal(size=(s, 20, 3)) * rng.uniform(0.01, 1.0, (s, 1, 3))
-        B = np.einsum("sna,snb->sab", P, P)
-        B[rng.random(s) < 0.3, 2] = 0.0  # some singular
-        full = np.linalg.pinv(B, rcond=1e-6)
-        part = rng.random(s) < 0.5
-        if part.any():
-            assert same_bits(np.linalg.pinv(B[part], rcond=1e-6), full[part])
+def test_the_agreement_test_sees_a_one_percent_change() -> None:
+    """The tolerances above are tight enough: the estimator with every point 1 % off along
+    one axis (an anisotropic error, so the plane tilts) fails them."""
+    rng = np.random.default_rng(2)
+    spec = RingSpec("ring2", sc.RING2_RADIUS, 18, 1.0, 0.0, 0.0, 0.002)
+    cfg = NormalEstimatorConfig(range_noise=0.002)
+    fast = NormalEstimator(spec.directions(), spec.radius, cfg)
+    fast.n_S = fast.n_S * np.array([1.01, 1.0, 1.0])
+    ref = ReferenceEstimator(spec.directions(), spec.radius, cfg)
+    planes = _planes(rng)
+    worst = 0.0
+    for T in _ring_path(rng, 60):
+        delta, detected = _scan(T, spec, planes, 0.002, rng)
+        for est in (fast, ref):
+            est.update(T, delta, detected)
+        got, want = fast.normals(), ref.normals()
+        both = (fast.source == SOURCE_FIT) & (ref.source == SOURCE_FIT)
+        if both.any():
+            worst = max(worst, float(np.abs(got[both] - want[both]).max()))
+    assert worst > 1e3 * NORMAL_TOL
 
 
 def test_ring_interaction_matrix_equals_the_previous_code_to_the_bit() -> None:

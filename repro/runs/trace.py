@@ -94,6 +94,7 @@ TRACKED_PACKAGES = (
     "pandas",
     "matplotlib",
     "scipy",
+    "numba",
 )
 NOT_INSTALLED = "not installed"
 
