@@ -9,6 +9,7 @@ from __future__ import annotations
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -38,8 +39,8 @@ from repro.sim.panda import PANDA_JOINTS, PANDA_LIMITS
 from repro.sim.robot import Robot, solve_ik
 from repro.sim.scene import Scene
 from repro.sim.world import WorldConfig
-from repro.vision.features import interaction_matrix_points, twist_transform
-from repro.vision.ibvs import feature_jacobian
+from repro.vision.features import twist_transform
+from repro.vision.ibvs import PointFeatureJacobian
 from repro.vision.pose import point_depths
 
 RING_NAMES = ("ring1", "ring2")
@@ -100,6 +101,20 @@ def check_config(config: Thomas2024Config) -> None:
             "paper's visual task uses all four points from t = 0 (Sec. V, Figs. 7b, 8b)")
 
 
+class _RingStep(NamedTuple):
+    """What a control step needs of ring ``k`` (made once by the controller)."""
+
+    k: int
+    L: np.ndarray | None  # its interaction matrix (6) when constant (the coarse model)
+    V: np.ndarray  # jV_Nj (9)
+    link: str  # the link its frame S_j is fixed to
+    model: str
+    radius: float  # [m]
+    threshold: float  # delta* [m]
+    gain: float  # lambda_j [1/s]
+    rows: slice  # its rows of A and b
+
+
 @dataclass
 class StepOutput:
     """What one control step computed (for the trace)."""
@@ -152,6 +167,14 @@ class Thomas2024Controller:
         #: flange carries both ring 2 and the camera)
         self._jac_links = tuple(dict.fromkeys([*(self._ring_links if config.proximity else []),
                                                CAMERA_LINK]))
+        # Per ring, what a step needs of it, and its rows of A and b (in ring order)
+        ends = np.cumsum([r.spec.n_sensors for r in rings]).tolist()
+        self._ring_steps = [
+            _RingStep(k, self._ring_L[k], self._ring_Vs[k], self._ring_links[k],
+                      config.ring_models[k], ring.spec.radius, config.thresholds[k],
+                      config.ring_gains[k], slice(end - ring.spec.n_sensors, end))
+            for k, (ring, end) in enumerate(zip(rings, ends, strict=True))]
+        self._feature_jacobian = PointFeatureJacobian(self.cV_e, len(target_points))
         self.prev_status = "solved"
 
     def step(self, q: np.ndarray, uv: np.ndarray, found: np.ndarray, Z_exact: np.ndarray,
@@ -164,36 +187,54 @@ class Thomas2024Controller:
         x = sc.INTRINSICS.to_normalized(uv)
         e_4p = (x - self.s_star).ravel()
         # eJ_e of eq. (7) and J_Nj of eq. (9), one pinocchio call per link
-        J = {link: self.robot.frame_jacobian(link, q) for link in self._jac_links}
+        frame_jacobian, J = self.robot.frame_jacobian, {}
+        for link in self._jac_links:
+            J[link] = frame_jacobian(link, q)
         used: list[np.ndarray | None] = [None] * len(self.rings)
         if cfg.proximity:
-            rows: list[Inequalities] = []
-            for k, (ring, reading) in enumerate(zip(self.rings, readings, strict=True)):
-                L = self._ring_L[k]
-                if L is None:
-                    normals = (self.estimators[k].normals() if cfg.ring_models[k] != "coarse"
-                               else None)
-                    used[k] = normals
-                    L = ring_interaction_matrix(self.dirs[k], reading.delta, ring.spec.radius,
-                                                cfg.ring_models[k], normals)
-                J_S = self._ring_Vs[k].dot(J[self._ring_links[k]])  # (9): jV_Nj J_Nj
-                rows.append(cbf_inequalities(L, J_S, reading.delta, cfg.thresholds[k],
-                                             cfg.ring_gains[k]))
-            ineq = Inequalities(np.concatenate([r.A for r in rows]),
-                                np.concatenate([r.b for r in rows]))
+            ineq = self._ring_rows(J, readings, used)
         else:
             ineq = Inequalities(np.empty((0, n)), np.empty(0))
         # Depths for L_x: PnP pose of the detected dots (render), exact geometry otherwise.
         Z = Z_exact if cfg.camera_mode == "exact" else point_depths(
             self.target_points, uv, sc.INTRINSICS.K(), self.Z_star)
-        J_4p = feature_jacobian(interaction_matrix_points(x, Z), self.cV_e,
-                                J[CAMERA_LINK])  # eq. (7)
+        J_4p = self._feature_jacobian(x, Z, J[CAMERA_LINK])  # eq. (7)
         res = self.qp.step(ibvs_objective(J_4p, e_4p, cfg.lambda_4p, cfg.mu), ineq, self.qd_max)
         # (the slack is all zeros when the hard QP is solved)
         max_slack = float(res.slack.max()) if m and res.status != "solved" else 0.0
         return StepOutput(res.u, res.status, e_4p, res.kappa, res.grad_L0,
                           res.iterations, res.solve_time_s, max_slack, res.qp_status,
                           tuple(used))
+
+    def _ring_rows(self, J: dict[str, np.ndarray], readings: list[RingReading],
+                   used: list[np.ndarray | None]) -> Inequalities:
+        """The CBF rows (9) of every ring, stacked in ring order: A (m, n), b (m,) [m/s].
+
+        Each ring's rows are written into its rows of fresh arrays (the QP's: the caller may
+        keep them); a ring whose rows do not fit there (:func:`cbf_inequalities`) gets
+        arrays of its own, and the rings' rows are then concatenated (the QP rejects a
+        wrong length). ``used[k]``: ring k's estimated normals (m_k, 3), if any.
+        """
+        A, b = np.empty((self.m, self.n)), np.empty(self.m)
+        rows: list[Inequalities] = []
+        in_place = True
+        for rs, reading in zip(self._ring_steps, readings, strict=True):
+            L, delta = rs.L, reading.delta
+            if L is None:
+                normals = (self.estimators[rs.k].normals() if rs.model != "coarse"
+                           else None)
+                used[rs.k] = normals
+                L = ring_interaction_matrix(self.dirs[rs.k], delta, rs.radius, rs.model,
+                                            normals)
+            J_S = rs.V.dot(J[rs.link])  # (9): jV_Nj J_Nj
+            b_k = b[rs.rows]
+            rows.append(cbf_inequalities(L, J_S, delta, rs.threshold, rs.gain,
+                                         (A[rs.rows], b_k)))
+            in_place = in_place and rows[-1].b is b_k
+        if in_place:
+            return Inequalities(A, b)
+        return Inequalities(np.concatenate([r.A for r in rows]),
+                            np.concatenate([r.b for r in rows]))
 
     def normal_columns(self, out: StepOutput, readings: list[RingReading]
                        ) -> dict[str, float | int]:

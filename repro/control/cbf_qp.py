@@ -25,7 +25,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from repro.control import kernels
 from repro.control.qp import QPProblem, QPSolution, QPSolver, lower_multipliers
+
+_F64 = np.dtype(float)
 
 
 class Objective(NamedTuple):
@@ -54,13 +57,16 @@ def ibvs_objective(J_4p: np.ndarray, e_4p: np.ndarray, lambda_4p: float, mu: flo
     n = J_4p.shape[1]
     # (ndarray.dot: the BLAS calls of @ -- syrk for J^T J, gemv --, without the matmul
     # ufunc's overhead on these small arrays; the same bits)
-    G = J_4p.T.dot(J_4p)
-    G.flat[:: n + 1] += mu  # + mu I (adding 0 off the diagonal changes nothing)
+    G = J_4p.T.dot(J_4p)  # (a fresh C-contiguous array)
+    if not (G.dtype == _F64 and isinstance(mu, float | int)
+            and kernels.add_to_diagonal(G, float(mu))):  # + mu I, compiled
+        G.ravel()[:: n + 1] += mu  # (a view of G's diagonal; the same operation)
     return Objective(G, (lambda_4p * J_4p.T).dot(e_4p))
 
 
 def cbf_inequalities(L_delta: np.ndarray, J_S: np.ndarray, delta: np.ndarray,
-                     delta_star: float, gain: float) -> Inequalities:
+                     delta_star: float, gain: float,
+                     out: tuple[np.ndarray, np.ndarray] | None = None) -> Inequalities:
     """thomas2024 eqs. (8)-(9): rows L_delta J_S u >= -gain (delta - delta*).
 
     Args:
@@ -70,8 +76,34 @@ def cbf_inequalities(L_delta: np.ndarray, J_S: np.ndarray, delta: np.ndarray,
         delta: (m,) measured distances [m].
         delta_star: threshold distance delta* [m].
         gain: lambda_j [1/s] of the class-K function alpha(e) = lambda_j e.
+        out: None, or ``(A, b)``: arrays (m, n) and (m,) (e.g. a ring's rows of the whole
+            QP's; not overlapping the inputs) to write the rows into, with the same
+            operations, when the rows fit them (float64 arrays throughout, ``A`` C-contiguous,
+            ``L_delta`` (m, 6), ``J_S`` (6, n), ``delta`` (m,); ``delta_star`` and ``gain``
+            Python floats or integers): the result then holds ``out``; otherwise fresh
+            arrays, as with None.
     """
-    return Inequalities(L_delta.dot(J_S), -gain * (delta - delta_star))  # .dot: @ for 2-D
+    if out is None or not _rows_fit(L_delta, J_S, delta, delta_star, gain, out):
+        return Inequalities(L_delta.dot(J_S), -gain * (delta - delta_star))  # .dot: @ for 2-D
+    A, b = out
+    L_delta.dot(J_S, out=A)
+    if not kernels.cbf_offsets(delta, float(delta_star), float(-gain), b):
+        np.subtract(delta, delta_star, out=b)  # (non-finite values: NumPy's operations)
+        np.multiply(-gain, b, out=b)
+    return Inequalities(A, b)
+
+
+def _rows_fit(L_delta: np.ndarray, J_S: np.ndarray, delta: np.ndarray, delta_star: float,
+              gain: float, out: tuple[np.ndarray, np.ndarray]) -> bool:
+    """:func:`cbf_inequalities`' rows can be written into ``out`` (see there)."""
+    A, b = out
+    m, n = A.shape
+    nd = np.ndarray
+    return (isinstance(delta_star, float | int) and isinstance(gain, float | int)
+            and type(L_delta) is nd and type(J_S) is nd and type(delta) is nd
+            and L_delta.dtype == J_S.dtype == delta.dtype == A.dtype == b.dtype == _F64
+            and A.flags.c_contiguous and L_delta.ndim == 2 and L_delta.shape[0] == m
+            and J_S.shape == (L_delta.shape[1], n) and delta.shape == b.shape == (m,))
 
 
 @dataclass(frozen=True)
@@ -184,10 +216,8 @@ class CBFQPController:
     def step(self, objective: Objective, ineq: Inequalities, qd_max: np.ndarray) -> CBFQPResult:
         """Solve eq. (10) with box bounds -qd_max <= u <= qd_max [rad/s]."""
         n, m = self.n, self.m
-        problem = QPProblem(
-            H=objective.H, g=objective.g, C=ineq.A, l=ineq.b, u=self._u_inf,
-            lb=-qd_max, ub=qd_max,
-        )
+        # H, g, C, l, u, lb, ub (positional: cheaper)
+        problem = QPProblem(objective.H, objective.g, ineq.A, ineq.b, self._u_inf, -qd_max, qd_max)
         sol = self.hard.solve(problem)
         if sol.status == "solved":  # (QPSolver: a "solved" x, z, z_box are finite)
             kappa = lower_multipliers(sol)

@@ -206,6 +206,27 @@ def _is_f64(a: Any, shape: tuple[int, ...]) -> TypeGuard[np.ndarray]:
     return type(a) is np.ndarray and a.dtype == _F64 and a.shape == shape
 
 
+_Arrays7 = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                 np.ndarray]
+
+
+def _plain(problem: QPProblem, n: int, m: int) -> _Arrays7 | None:
+    """``problem``'s arrays when every one is already a float64 ndarray of its (n, m) shape
+    (none None: :func:`_as_dense` would have nothing to convert, fill or reshape), else
+    None."""
+    H, g, C, l, u, lb, ub = problem
+    f64 = _F64
+    if (type(H) is np.ndarray and H.dtype == f64 and H.shape == (n, n)
+            and type(g) is np.ndarray and g.dtype == f64 and g.shape == (n,)
+            and type(C) is np.ndarray and C.dtype == f64 and C.shape == (m, n)
+            and type(l) is np.ndarray and l.dtype == f64 and l.shape == (m,)
+            and type(u) is np.ndarray and u.dtype == f64 and u.shape == (m,)
+            and type(lb) is np.ndarray and lb.dtype == f64 and lb.shape == (n,)
+            and type(ub) is np.ndarray and ub.dtype == f64 and ub.shape == (n,)):
+        return H, g, C, l, u, lb, ub
+    return None
+
+
 def _vec(v: np.ndarray | None, size: int, fill: float, name: str) -> np.ndarray:
     if v is None:
         return np.full(size, fill)
@@ -738,7 +759,7 @@ class _DaqpBackend:
         # already one, d.g and d.C may be the caller's).
         k = n + m
         blower, bupper = d.bounds[:k], d.bounds[k:]  # [lb; l], [ub; u]
-        f, A = d.g.copy(), np.array(d.C, dtype=float, order="C")
+        f, A = d.g.copy(), d.C.copy()  # (float64 already; a copy is in C order)
         # QPSolver.solve has refused NaN bounds, l = +inf and u = -inf: equal bounds are finite
         eq = blower == bupper
         eq_key = eq.tobytes()
@@ -955,6 +976,9 @@ class QPSolver:
         self._backend = _BACKENDS[solver](self.n, self.m, eps_abs, self.max_iter, warm_start,
                                           self.max_iter_in)
         self._kkt_work = _KKTWork(self.n, self.m)
+        from repro.control import kernels  # lazy: numba
+
+        self._plain_dense, self._all_finite3 = kernels.plain_dense, kernels.all_finite3
         self._certified = bool(getattr(self._backend, "certifies_kkt", False))
 
     def reset(self) -> None:
@@ -1000,12 +1024,12 @@ class QPSolver:
             QPDimensionError: a shape does not match ``(n, m)``.
         """
         t0 = time.perf_counter()
-        d = _as_dense(problem, self.n, self.m)
+        d, checked = self._dense(problem)
         k = self.m + self.n
         attempts = total = 0
-        if not all_finite(d.H, d.g, d.C):
+        if not checked and not all_finite(d.H, d.g, d.C):
             raw, status, kkt = self._trivial(d, "failed")
-        elif not _bounds_consistent(d.bounds[:k], d.bounds[k:]):
+        elif not checked and not _bounds_consistent(d.bounds[:k], d.bounds[k:]):
             # some l > u, a NaN bound, or l = +inf or u = -inf (no x satisfies the row;
             # OSQP would raise on it)
             raw, status, kkt = self._trivial(
@@ -1028,6 +1052,30 @@ class QPSolver:
             raw.x, raw.z, raw.z_box, status, raw.iterations, time.perf_counter() - t0,
             kkt.primal_infeasibility, kkt.stationarity, raw.inner_iterations, total, attempts)
 
+    def _dense(self, problem: QPProblem) -> tuple[_Dense, bool]:
+        """``_as_dense(problem, n, m)``, and True when its data are known to pass the checks
+        of :meth:`solve` (``H``, ``g``, ``C`` finite, bounds consistent). Float64 arrays of
+        the right shapes are filled and checked in one compiled call
+        (:func:`repro.control.kernels.plain_dense`: the same bits); anything else, or
+        data that fail, take :func:`_as_dense` (False: :meth:`solve` checks them)."""
+        n, m = self.n, self.m
+        arrays = _plain(problem, n, m)
+        if arrays is not None:
+            H, g, C, l, u, lb, ub = arrays
+            H_sym, bounds = np.empty((n, n)), np.empty(2 * (n + m))
+            if self._plain_dense(H, g, C, l, u, lb, ub, H_sym, bounds):
+                return _Dense(H_sym, g, C, l, u, lb, ub, bounds), True
+        return _as_dense(problem, n, m), False
+
+    def _finite(self, x: np.ndarray, z: np.ndarray, z_box: np.ndarray) -> bool:
+        """``all_finite(x, z, z_box)``; one compiled call for float64 vectors
+        (:func:`repro.control.kernels.all_finite3`)."""
+        if (type(x) is np.ndarray and type(z) is np.ndarray and type(z_box) is np.ndarray
+                and x.dtype == _F64 and z.dtype == _F64 and z_box.dtype == _F64
+                and x.ndim == 1 and z.ndim == 1 and z_box.ndim == 1):
+            return bool(self._all_finite3(x, z, z_box))
+        return all_finite(x, z, z_box)
+
     def _attempt(self, d: _Dense) -> tuple[_RawResult, QPStatus, _KKT]:
         """One backend solve, its KKT residuals and its status after the KKT check.
 
@@ -1036,7 +1084,7 @@ class QPSolver:
         """
         raw = self._backend.solve(d)
         if self._certified and raw.status == "solved":
-            if all_finite(raw.x, raw.z, raw.z_box):
+            if self._finite(raw.x, raw.z, raw.z_box):
                 if raw.iterations <= self.max_iter:
                     return raw, "solved", _CERTIFIED  # see _DaqpBackend.certifies_kkt
             else:  # no certificate without a finite solution: zeros instead, checked below

@@ -49,6 +49,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cache, cached_property
 from typing import Any, NamedTuple
 
 import cv2
@@ -124,6 +125,23 @@ class ImageBounds(NamedTuple):
     u_max: float
     v_min: float
     v_max: float
+
+
+class _Affine(NamedTuple):
+    """The no-skew pixel -> normalised map of :meth:`Intrinsics.to_normalized`."""
+
+    offset: np.ndarray  # (u0, v0) [px], as np.array gives them (read-only)
+    scale: np.ndarray  # (fu, fv) [px] (read-only)
+    #: u0, v0, fu, fv [px] when offset and scale are float64 arrays (None: integers)
+    constants: tuple[float, float, float, float] | None
+
+
+@cache
+def _normalize_points() -> Any:
+    """:func:`repro.vision.point_kernels.normalize_points`, imported on first use (numba)."""
+    from repro.vision.point_kernels import normalize_points
+
+    return normalize_points
 
 
 @dataclass(frozen=True)
@@ -223,13 +241,32 @@ class Intrinsics:
         .. math:: y = (v - v_0) / f_v, \\qquad x = (u - u_0 - s y) / f_u
         """
         uv = np.asarray(uv, dtype=float)
-        if (self.skew == 0.0 and self.u0 != 0.0 and uv.shape[-1:] == (2,)
+        affine = self._normalizing_affine
+        if (affine is not None and affine.constants is not None and uv.ndim == 2
+                and uv.shape[1] == 2):
+            # (N, 2) finite pixels: one compiled loop of the broadcast's operations below
+            x = np.empty(uv.shape)
+            if _normalize_points()(uv, *affine.constants, x):
+                return x
+        if (affine is not None and uv.shape[-1:] == (2,)
                 and np.count_nonzero(np.isfinite(uv)) == uv.size):
             # no skew, finite pixels: one broadcast, the same bits as the formula below (its
             # "- s y" subtracts a zero, and u - u0 is never -0 when u0 != 0)
-            return (uv - np.array((self.u0, self.v0))) / np.array((self.fu, self.fv))
+            return (uv - affine.offset) / affine.scale
         y = (uv[..., 1] - self.v0) / self.fv
         return np.stack([(uv[..., 0] - self.u0 - self.skew * y) / self.fu, y], axis=-1)
+
+    @cached_property
+    def _normalizing_affine(self) -> _Affine | None:
+        """What :meth:`to_normalized`'s no-skew forms use, made once (the intrinsics are
+        frozen); None when they do not apply (a skew, or ``u0 = 0``)."""
+        if not (self.skew == 0.0 and self.u0 != 0.0):
+            return None
+        offset, scale = np.array((self.u0, self.v0)), np.array((self.fu, self.fv))
+        offset.flags.writeable = scale.flags.writeable = False
+        constants = ((float(offset[0]), float(offset[1]), float(scale[0]), float(scale[1]))
+                     if offset.dtype == scale.dtype == np.float64 else None)
+        return _Affine(offset, scale, constants)
 
     def to_pixels(self, xy: np.ndarray) -> np.ndarray:
         """Normalised coordinates (N, 2) [-] -> pixel coordinates (N, 2) [px].

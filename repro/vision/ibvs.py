@@ -35,9 +35,13 @@ from __future__ import annotations
 import numpy as np
 
 from repro.errors import NonFiniteInputError, UnknownChoiceError
+from repro.vision.features import interaction_matrix_points
 
 #: Ways :func:`ibvs_joint_velocity` and :func:`saturate` bound a joint velocity vector.
 SATURATIONS = ("clip", "scale")
+
+
+_F64 = np.dtype(float)
 
 
 def _all_finite(a: np.ndarray) -> bool:
@@ -111,6 +115,48 @@ def feature_jacobian(L_s: np.ndarray, cV_e: np.ndarray, eJ_e: np.ndarray) -> np.
     cV_e = _matrix("cV_e", cV_e, 6, 6)
     eJ_e = _matrix("eJ_e", eJ_e, 6, None)
     return L_s @ (cV_e @ eJ_e)
+
+
+class PointFeatureJacobian:
+    """:func:`feature_jacobian` of the interaction matrix of N points
+    (:func:`repro.vision.features.interaction_matrix_points`) for one camera mount ``cV_e``,
+    made once for a control loop (thomas2024 eq. (7)): the same two matrix products on
+    arrays of the same shapes and layout, hence the same bits, with fewer calls.
+
+    ``cV_e`` is copied (read-only) and checked once here. A call writes ``L_s`` into its own
+    buffer in one compiled call (:func:`repro.vision.point_kernels.fill_interaction_matrix`:
+    points within bounds that make every entry finite) and checks that ``eJ_e`` is a finite
+    (6, n) array; anything else (a lost point's NaN, a non-finite Jacobian, other shapes or
+    types) goes through ``feature_jacobian(interaction_matrix_points(xy, Z), cV_e, eJ_e)``,
+    which raises what it raises.
+
+    Args:
+        cV_e: (6, 6) twist transformation flange -> camera (see :func:`feature_jacobian`).
+        n_points: N, the points of every call.
+    """
+
+    def __init__(self, cV_e: np.ndarray, n_points: int) -> None:
+        from repro.vision.point_kernels import fill_interaction_matrix  # lazy: numba
+
+        self._fill = fill_interaction_matrix
+        self.cV_e = np.array(cV_e)  # (a constant of the loop: its checks are made here)
+        self.cV_e.flags.writeable = False
+        self.n_points = n_points
+        self._checked = (self.cV_e.dtype == _F64 and self.cV_e.shape == (6, 6)
+                         and _all_finite(self.cV_e))
+        self._L = np.empty((2 * n_points, 6))  # L_s, rows x1, y1, x2, ... (C order)
+
+    def __call__(self, xy: np.ndarray, Z: np.ndarray, eJ_e: np.ndarray) -> np.ndarray:
+        """``J_s`` (2N, n) for normalised points ``xy`` (N, 2) [-], depths ``Z`` (N,) [m] and
+        the flange Jacobian ``eJ_e`` (6, n) (see :func:`feature_jacobian`)."""
+        N, L_s = self.n_points, self._L
+        if (self._checked and type(xy) is np.ndarray and xy.dtype == _F64
+                and xy.shape == (N, 2) and type(Z) is np.ndarray and Z.dtype == _F64
+                and Z.shape == (N,) and type(eJ_e) is np.ndarray and eJ_e.dtype == _F64
+                and eJ_e.ndim == 2 and eJ_e.shape[0] == 6 and _all_finite(eJ_e)
+                and self._fill(xy, Z, L_s)):
+            return L_s @ (self.cV_e @ eJ_e)
+        return feature_jacobian(interaction_matrix_points(xy, Z), self.cV_e, eJ_e)
 
 
 def ibvs_camera_velocity(L: np.ndarray, e: np.ndarray, gain: float) -> np.ndarray:
