@@ -518,6 +518,23 @@ def test_warm_sequence_follows_changing_data(solver: str) -> None:
         np.testing.assert_allclose(sol.z_box, zb_ref, atol=1e-6, err_msg=str(change))
 
 
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_warm_sequence_without_rows(solver: str) -> None:
+    """m = 0 (a controller with no CBF rows, e.g. thomas2024 case 1 without proximity): a warm
+    sequence of box-constrained QPs, each the clip of the unconstrained optimum (DAQP's
+    ``update`` failed on an empty A before it was given None)."""
+    rng = np.random.default_rng(5)
+    qp = QPSolver(7, 0, solver)
+    box = np.linspace(0.5, 2.0, 7)
+    for _ in range(6):
+        g = rng.normal(size=7) * 2.0
+        H = np.diag(rng.uniform(0.5, 2.0, 7))
+        sol = qp.solve(QPProblem(H, g, np.empty((0, 7)), np.empty(0), np.empty(0), -box, box))
+        assert sol.status == "solved"
+        np.testing.assert_allclose(sol.x, np.clip(-g / np.diag(H), -box, box), atol=1e-7)
+        assert sol.z.shape == (0,)
+
+
 # --------------------------------------------------------------------------------------
 # 4. Bad configuration
 # --------------------------------------------------------------------------------------

@@ -772,7 +772,8 @@ class _DaqpBackend:
                 return _RawResult(np.zeros(n), np.zeros(m), np.zeros(n), "failed", 0, 0)
             model.settings = {"primal_tol": self.eps_abs, "iter_limit": self.max_iter}
             self._model, self._eq = model, eq_key
-        elif self._model.update(H=d.H, f=f, A=A, bupper=bupper, blower=blower) < 0:
+        elif self._model.update(H=d.H, f=f, A=A if m else None, bupper=bupper,
+                                blower=blower) < 0:  # (daqp 0.11: an empty A fails update)
             self.reset()
             return _RawResult(np.zeros(n), np.zeros(m), np.zeros(n), "failed", 0, 0)
         x, _, exitflag, info = self._model.solve()
