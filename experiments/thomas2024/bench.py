@@ -2,8 +2,8 @@
 
 The controller step is timed on realistic states: the joint positions recorded
 in results/thomas2024/<case>/trace.csv are replayed (robot reset to each q,
-sensors read, then ``Thomas2024Controller.step`` timed). Without those traces,
-the run is made first (exact camera, 4 s).
+sensors read, then ``Thomas2024Controller.step`` timed), :data:`STEP_PASSES` times, each
+state's least time kept. Without those traces, the run is made first (exact camera, 4 s).
 
 The QP solver table (:func:`qp_solver_table`) replays the same states once more, records
 the hard CBF-QPs (10) the controller builds, and times every backend of
@@ -57,6 +57,25 @@ def _mover_poses(df: pd.DataFrame, names: list[str]) -> dict[str, list[np.ndarra
         v = df[cols].to_numpy(dtype=float)
         out[name] = [pb_to_pose(r[:3], r[3:]) for r in v]
     return out
+
+
+STEP_PASSES = 3
+"""Passes of a controller-step replay (fresh controller each): each state's least time over
+the passes is kept. # ours: on a shared machine interference from other work only adds
+time (one pass: case 2's DAQP median was 94, 105 and 127 us in three bench runs on one
+machine on 2026-12-05)."""
+
+
+def _timed_steps(cfg: C.Thomas2024Config, states: np.ndarray, tmp: Path,
+                 movers: dict[str, list[np.ndarray]] | None = None,
+                 passes: int = STEP_PASSES) -> dict[str, list[float]]:
+    """:func:`_replay` ``passes`` times with a fresh controller; the controller step's and
+    the QP's time of each state [s] are the least over the passes (the same states and
+    history each pass, so the same work; steps without a QP have no QP time)."""
+    runs = [_replay(cfg, states, tmp, movers=movers) for _ in range(passes)]
+    return {"step": np.min([r["step"] for r in runs], axis=0).tolist(),
+            "qp": np.min([r["qp"] for r in runs], axis=0).tolist(),
+            "rays": runs[0]["rays"]}
 
 
 class _RecordingSolver(QPSolver):
@@ -285,7 +304,7 @@ def bench(results_dir: Path) -> list[dict[str, object]]:
             sequences[case] = (cls(), states)
             for solver in QPS:
                 cfg = replace(cls(), camera_mode="exact", qp_solver=solver)
-                t = _replay(cfg, states, tmp)
+                t = _timed_steps(cfg, states, tmp)
                 rows.append(timing_row(f"{case}.controller_step[{solver}]", t["step"]))
                 rows.append(timing_row(f"{case}.qp_solve[{solver}]", t["qp"]))
                 if solver == "proxsuite":
@@ -298,7 +317,7 @@ def bench(results_dir: Path) -> list[dict[str, object]]:
         movers = _mover_poses(df, ["hand"])
         for solver in QPS:
             cfg3 = replace(C.Case3Config(), camera_mode="exact", qp_solver=solver)
-            t = _replay(cfg3, states3, tmp, movers=movers)
+            t = _timed_steps(cfg3, states3, tmp, movers=movers)
             rows.append(timing_row(f"case3.controller_step[{solver}]", t["step"]))
             rows.append(timing_row(f"case3.qp_solve[{solver}]", t["qp"]))
         rows += qp_solver_table(sequences, tmp)
