@@ -59,11 +59,11 @@ def _mover_poses(df: pd.DataFrame, names: list[str]) -> dict[str, list[np.ndarra
     return out
 
 
+#: Passes of a controller-step replay (fresh controller each): each state's least time over
+#: the passes is kept. ours: on a shared machine interference from other work only adds
+#: time (one pass: case 2's DAQP median was 94, 105 and 127 us in three bench runs on one
+#: machine on 2026-12-05).
 STEP_PASSES = 3
-"""Passes of a controller-step replay (fresh controller each): each state's least time over
-the passes is kept. # ours: on a shared machine interference from other work only adds
-time (one pass: case 2's DAQP median was 94, 105 and 127 us in three bench runs on one
-machine on 2026-12-05)."""
 
 
 def _timed_steps(cfg: C.Thomas2024Config, states: np.ndarray, tmp: Path,

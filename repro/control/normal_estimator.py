@@ -32,15 +32,16 @@ from repro.errors import ConfigError
 #: Where a sensor's normal came from (:attr:`NormalEstimator.source`).
 SOURCE_NONE, SOURCE_FIT, SOURCE_HELD = 0, 1, 2
 
+#: Eigenvalues of B below ``PINV_RCOND`` times the largest are dropped from B^-1 (the
+#: pseudo-inverse's cutoff, numpy.linalg.pinv's rcond). ours: kept from the first
+#: implementation; with 2 mm range noise a well-posed fit has lambda_min >= 3e-5 lambda_max
+#: (points within 1.1 m of the ring centre), so it acts only on noise-free rings.
 PINV_RCOND = 1e-6
-"""Eigenvalues of B below ``PINV_RCOND`` times the largest are dropped from B^-1 (the
-pseudo-inverse's cutoff; numpy.linalg.pinv's rcond). # ours: a fit reaching it is far below
-the degeneracy gate already; kept from the first implementation."""
 
+#: Cap on the cyclic Jacobi sweeps of a 3x3 eigen-decomposition. ours: a numerical rule,
+#: Jacobi converges quadratically and a 3x3 needs 3-6 sweeps to full double precision; the
+#: cap only bounds a NaN input.
 JACOBI_SWEEPS = 30
-"""Cap on the cyclic Jacobi sweeps of a 3x3 eigen-decomposition. # ours: a numerical rule,
-Jacobi converges quadratically and a 3x3 needs 3-6 sweeps to full double precision; the cap
-only bounds a NaN input."""
 
 
 def fit_plane_normal(points: np.ndarray, rcond: float = 1e-6) -> np.ndarray | None:
