@@ -132,3 +132,14 @@ def test_config_rejects_bad_counts(field: str, value: float) -> None:
 def test_config_rejects_bad_values(field: str, value: float) -> None:
     with pytest.raises(ConfigError, match=field):
         NormalEstimatorConfig(**{field: value})
+
+
+def test_bad_readings_are_refused_before_anything_is_stored() -> None:
+    """A reading of the wrong length raises, and the history is what it was."""
+    est = NormalEstimator(np.eye(3), 0.1, NormalEstimatorConfig(history=3))
+    est.update(np.eye(4), np.array([0.2, 0.3, 1.0]), np.array([True, True, False]))
+    est.update(np.eye(4), np.array([0.2, 0.3, 1.0]), np.array([True, True, False]))
+    before = (est._slot, est._count, est._current)
+    with pytest.raises(ValueError, match="readings"):
+        est.update(np.eye(4), np.array([0.2, 0.3]), np.array([True, True]))
+    assert (est._slot, est._count, est._current) == before

@@ -165,19 +165,19 @@ class NormalEstimator:
     def update(self, T_world_ring: np.ndarray, delta: np.ndarray, detected: np.ndarray) -> None:
         """Store this step's detections: points (delta + r) n_S in the ring frame [m]; the
         previous step's go to the history (the oldest is dropped when it is full)."""
-        h = self._T_past.shape[0]
-        if self._current is not None and h > 0:
-            s = self._slot
-            self._T_past[s], self._p_past[s], self._d_past[s] = self._current
-            self._slot = (s + 1) % h
-            self._count = min(self._count + 1, h)
         m = self.n_S.shape[0]
         T = np.array(T_world_ring, dtype=float)
         delta = np.asarray(delta, dtype=float)
         det = np.array(detected, dtype=np.bool_)
         if T.shape != (4, 4) or delta.shape != (m,) or det.shape != (m,):
             raise ValueError(f"normal estimator: need a (4, 4) pose and ({m},) readings, got "
-                             f"{T.shape}, {delta.shape}, {det.shape}")
+                             f"{T.shape}, {delta.shape}, {det.shape}")  # (nothing stored)
+        h = self._T_past.shape[0]
+        if self._current is not None and h > 0:
+            s = self._slot
+            self._T_past[s], self._p_past[s], self._d_past[s] = self._current
+            self._slot = (s + 1) % h
+            self._count = min(self._count + 1, h)
         self._current = (T, (delta + self.radius)[:, None] * self.n_S, det)
 
     def normals(self) -> np.ndarray:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from repro.control.normal_estimator import (  # noqa: F401  (re-exported)
+from repro.control.normal_estimator import (
     SOURCE_FIT,
     SOURCE_HELD,
     SOURCE_NONE,
@@ -28,6 +28,10 @@ from repro.control.normal_estimator import (  # noqa: F401  (re-exported)
     fit_plane_normal,
 )
 from repro.errors import UnknownChoiceError
+
+__all__ = ["MODELS", "SOURCE_FIT", "SOURCE_HELD", "SOURCE_NONE", "L_delta_beta1",
+           "L_delta_coarse", "L_delta_exact", "NormalEstimator", "NormalEstimatorConfig",
+           "fit_plane_normal", "ring_interaction_matrix"]
 
 #: Interaction-matrix models of thomas2024: "exact" eq. (2) with the estimated
 #: normal, "beta1" eq. (5) (beta = 1, estimated normal), "coarse" eq. (6).
