@@ -196,3 +196,31 @@ def test_a_kept_robot_box_grown_by_the_joint_motion_holds_the_fresh_box(scene: S
                            (robot.pb_joints, robot.q()))[0]
         assert got == _brute(scene, robot.body, bid, groups, DISTANCE_CAP), k
     assert 5 < made < 150 and cp.skipped > 20
+
+
+def test_a_kept_box_follows_every_move_of_its_body(scene: Scene,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """The scene's static and scripted bodies keep their PyBullet box between moves (the far
+    test asks it once per pose): a limb moved in and out of the cap by ``Scene.move`` gives
+    the full query's answer at every step, and its box is asked only after it moved."""
+    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
+    scene.add_capsule("limb", 0.05, 0.3, _pose(np.array([3.0, 0.0, 0.5])), (1, 0, 0, 1),
+                      moving=True)
+    bid = scene["limb"].ids[0]
+    asked: list[int] = []
+    real_aabb = p.getAABB
+
+    def counting_aabb(body: int, link: int = -1, **kw: int) -> tuple:
+        asked.append(body)
+        return real_aabb(body, link, **kw)
+
+    monkeypatch.setattr("repro.sim.closest.p.getAABB", counting_aabb)
+    cp = scene._closest
+    for k, r in enumerate([3.0, 3.0, 3.0, 0.4, 3.0, 3.0, 1.02, 3.0]):
+        scene.move("limb", _pose(np.array([r, 0.1 * k, 0.6])))
+        for _ in range(3):  # still: the kept box
+            got = scene.distances(robot)["limb"]
+            assert got == _brute(scene, robot.body, bid, (None,), DISTANCE_CAP)[0]
+    assert cp.skipped > 5
+    # one box per pose at most, never one per query
+    assert asked.count(bid) <= 8 < cp.skipped + cp.queries

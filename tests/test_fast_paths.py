@@ -140,6 +140,61 @@ def test_joints_and_capsules_equal_the_code_before(motion: HumanMotion) -> None:
             assert not a.p0.flags.writeable and not a.p1.flags.writeable
 
 
+def test_a_body_part_that_did_not_move_keeps_its_capsule(motion: HumanMotion) -> None:
+    """Reaching (standing, one arm moving), the other parts' capsules are the same objects
+    from step to step (a mover and the tracker then see them unchanged by identity) and the
+    reaching arm's are new; walking, every capsule is new. Their values are a fresh
+    person's (the test above)."""
+    m = HumanMotion(motion.path, T_world_base=motion.T_world_base)
+    reach = m.path.t_reach - 0.5 * m.path.reach_duration
+    a, b = m.capsules(reach), m.capsules(reach + 1e-3)
+    kept = {n for (n, x), (_, y) in zip(a, b, strict=True) if x is y}
+    side = "l" if m.path.arm == "left" else "r"
+    assert kept == {n for n, _ in a} - {f"{k}_{side}" for k in ("upper_arm", "forearm",
+                                                                  "hand")}
+    walk = 0.5 * (m.path.t_enter + reach - 0.5 * m.path.reach_duration)
+    a, b = m.capsules(walk), m.capsules(walk + 1e-3)
+    assert m.phase(walk) == "walk_in" and not any(x is y for (_, x), (_, y) in zip(
+        a, b, strict=True))
+
+
+def test_a_frozen_pose_given_again_is_not_placed_again(monkeypatch: pytest.MonkeyPatch
+                                                       ) -> None:
+    """Scene.move keeps a read-only array that owns its data as the body's pose and takes
+    the same object again as the same pose (no PyBullet call); a writeable array written in
+    place, or a read-only view of one, is compared by value and placed when it changed."""
+    from repro.sim import scene as scene_mod
+    s = scene_mod.Scene(WorldConfig(physics_dt=1e-3, control_dt=1e-3))
+    try:
+        s.add_capsule("limb", 0.05, 0.3, np.eye(4), (1, 0, 0, 1), moving=True)
+        placed: list[int] = []
+        real = scene_mod._place
+        monkeypatch.setattr(scene_mod, "_place",
+                            lambda c, ids, body, T: (placed.append(1), real(c, ids, body, T)))
+        T = np.eye(4)
+        T[0, 3] = 0.5
+        T.setflags(write=False)
+        s.move("limb", T)
+        s.move("limb", T)
+        assert len(placed) == 1 and s["limb"].T_world is T
+        W = np.eye(4)
+        s.move("limb", W)
+        W[1, 3] = 0.25  # written in place after the move
+        s.move("limb", W)
+        assert len(placed) == 3 and s["limb"].T_world[1, 3] == 0.25
+        V = W.view()
+        V.setflags(write=False)  # read-only, but its base is not
+        s.move("limb", V)
+        W[2, 3] = 0.75
+        s.move("limb", V)
+        assert len(placed) == 4 and s["limb"].T_world[2, 3] == 0.75
+        pos = p.getBasePositionAndOrientation(s["limb"].ids[0],
+                                              physicsClientId=s.physics.client)[0]
+        assert pos == pytest.approx((0.0, 0.25, 0.75))
+    finally:
+        s.close()
+
+
 def test_the_skeleton_cache_tells_zero_from_negative_zero(motion: HumanMotion) -> None:
     """An arm pose equal to another but for a zero's sign is a new entry (its arithmetic may
     differ in that sign), and a new pose gives a new skeleton."""

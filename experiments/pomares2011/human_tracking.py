@@ -85,7 +85,9 @@ class Bones:
             cap = self.caps[name]
             seen = self.poses.get(name)
             if seen is None or seen[0] is not cap:  # a capsule of a new body state
-                seen = self.poses[name] = (cap, np.asarray(cap.T_world()))
+                T = np.asarray(cap.T_world())  # (a copy of its own)
+                T.setflags(write=False)  # so Scene.move knows it unchanged by identity
+                seen = self.poses[name] = (cap, T)
             return seen[1]
         return pose
 

@@ -107,8 +107,22 @@ class ClosestPoints:
         self._hint: dict[tuple[int, tuple[Links, ...]], dict[int, float]] = {}
         self._members: dict[tuple[Links, ...], _Members] = {}
         self.boxes = LinkBoxes(client)  # the far test's boxes
+        #: bodies that move only when the owner says so (:meth:`moved`): their PyBullet box,
+        #: kept from the far test that asked it until they move (None: not asked since)
+        self._kept_box: dict[int, tuple[list[float], list[float]] | None] = {}
         self.queries = 0  # getClosestPoints calls made (for tests and benchmarks)
         self.skipped = 0  # pairs proved beyond the cap by their boxes (no query)
+
+    def keep_box(self, body: int) -> None:
+        """``body`` moves only through its owner, who calls :meth:`moved` after each move
+        (a scene's static and scripted bodies, not a dynamic one): the far test asks its box
+        once per pose instead of once per query."""
+        self._kept_box.setdefault(body, None)
+
+    def moved(self, body: int) -> None:
+        """``body`` (see :meth:`keep_box`) was moved: its box is asked again."""
+        if body in self._kept_box:
+            self._kept_box[body] = None
 
     def minima(self, body_a: int, body_b: int, groups: tuple[Links, ...], cap: float
                ) -> list[float]:
@@ -134,7 +148,7 @@ class ClosestPoints:
         members = self._members.get(groups)
         if members is None:
             members = self._members[groups] = _Members(groups)
-        ask, client = p.getClosestPoints, self.client
+        ask, client, kept = p.getClosestPoints, self.client, self._kept_box
         box_a: tuple[list[float], list[float]] | None = None
         out = []
         for body_b in bodies_b:
@@ -144,8 +158,12 @@ class ClosestPoints:
                 if box_a is None:
                     box_a = (self.boxes.box(body_a) if joints_a is None
                              else self.boxes.moving_box(body_a, *joints_a))
-                lo, hi = p.getAABB(body_b, -1, physicsClientId=client)
-                if box_gap(box_a, lo, hi) > cap + FAR_MARGIN:  # no shape within the cap
+                box_b = kept.get(body_b)
+                if box_b is None:
+                    box_b = p.getAABB(body_b, -1, physicsClientId=client)
+                    if body_b in kept:
+                        kept[body_b] = box_b
+                if box_gap(box_a, *box_b) > cap + FAR_MARGIN:  # no shape within the cap
                     self.skipped += 1
                     out.append([cap] * members.n)
                     continue  # (the hint stays: cap + HINT_MARGIN)

@@ -452,6 +452,8 @@ class HumanMotion:
                     (f"hand_{tag}", cap(J[f"wrist_{tag}"], J[f"fingertip_{tag}"], r.hand)),
                     (f"thigh_{tag}", cap(J[f"hip_{tag}"], J[f"knee_{tag}"], r.thigh)),
                     (f"shank_{tag}", cap(J[f"knee_{tag}"], J[f"ankle_{tag}"], r.shank))]
+        if cached is not None and cached[0][:2] == key[:2]:
+            out = _kept(cached[1], out)  # standing, one arm moving: the rest is as it was
         self._capsule_cache[r] = (key, out)
         return list(out)
 
@@ -494,6 +496,19 @@ class HumanMotion:
             peak = max(peak, float(np.max(np.linalg.norm(cur - prev, axis=1))) / dt)
             prev = cur
         return peak
+
+
+def _kept(old: list[tuple[str, Capsule]], new: list[tuple[str, Capsule]]
+          ) -> list[tuple[str, Capsule]]:
+    """``new`` with each capsule whose end points have the same bits as in ``old`` (and the
+    same radius) replaced by ``old``'s object: a body part that did not move keeps its
+    capsule, so its users (a mover, a tracker) see it unchanged by identity."""
+    out = []
+    for (name, c), (_, o) in zip(new, old, strict=True):
+        same = (c.radius == o.radius and c.p0.tobytes() == o.p0.tobytes()
+                and c.p1.tobytes() == o.p1.tobytes())
+        out.append((name, o if same else c))
+    return out
 
 
 def add_tracking_noise(capsules: Sequence[tuple[str, Capsule]], std: float,

@@ -154,6 +154,14 @@ def _create_shape(client: int, part: Part, rgba: Sequence[float], collision: boo
     return col, vis
 
 
+def _frozen(T: np.ndarray) -> bool:
+    """``T`` is a float64 array that owns its data and is read-only: no one can write it
+    (a mover's pose, e.g. pomares2011's ``Bones``), so it is kept as it is, not copied,
+    and the same object given again is the same pose."""
+    return (type(T) is np.ndarray and T.dtype == np.float64 and T.base is None
+            and not T.flags.writeable)
+
+
 def _place(client: int, ids: Sequence[int], body: SceneBody, T_world: np.ndarray) -> None:
     """Put the PyBullet bodies ``ids`` of ``body`` (its parts, or its dots) in ``client`` at
     the body pose ``T_world``."""
@@ -365,6 +373,8 @@ class Scene:
                 c, v = _create_shape(client, part, rgba, col)
                 pos, quat = pose_to_pb(T_world @ part.T_body_part)
                 out.append(p.createMultiBody(0.0, c, v, pos, quat, physicsClientId=client))
+        for bid in ids:  # mass 0: moved by move() alone (the far test keeps its box)
+            self._closest.keep_box(bid)
         body = SceneBody(name, kind, np.asarray(T_world, float).copy(), rgba, collision, render,
                          ids, render_ids, tuple(parts), moving, info=info or {},
                          obstacle=obstacle)
@@ -477,6 +487,8 @@ class Scene:
             raise UnknownChoiceError("scene body", name, self.bodies)
         if not body.moving:
             raise ConfigError(f"body {name!r} was not added with moving=True")
+        if T_world is body.T_world and _frozen(T_world):
+            return  # the very pose it was put at, which nothing can have written since
         T_world = np.asarray(T_world, dtype=float)
         old = body.T_world
         if T_world.shape == old.shape == (4, 4):
@@ -488,9 +500,12 @@ class Scene:
                 T_world.shape == old.shape and T_world.tolist() == old.tolist())):
             return  # where it is: resetting a body to its own pose changes nothing
         _place(self.physics.client, body.ids, body, T_world)
+        for bid in body.ids:
+            self._closest.moved(bid)  # (its box, kept by the ground truth's far test)
+        T_world = T_world if _frozen(T_world) else T_world.copy()
         if body.render_ids:
-            self._mirror_pending[name] = T_world.copy()
-        body.T_world = T_world.copy()
+            self._mirror_pending[name] = T_world
+        body.T_world = T_world
 
     def moving_bodies(self) -> list[SceneBody]:
         """Bodies whose pose is logged every row."""
