@@ -224,3 +224,43 @@ def test_a_kept_box_follows_every_move_of_its_body(scene: Scene,
     assert cp.skipped > 5
     # one box per pose at most, never one per query
     assert asked.count(bid) <= 8 < cp.skipped + cp.queries
+
+
+def test_below_bounds_give_the_exact_value_only_where_it_is_below(scene: Scene) -> None:
+    """``below``: each group's value is the full query's where it is below the group's
+    bound and ``inf`` where it is not; a body with a bound at the cap is answered in full;
+    a body asked below its bounds leaves the hints of full queries as they were."""
+    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
+    groups_js = [scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True),
+                 scene.add_joint_group("pa10", "hand", HAND_JOINTS, "bh8_")]
+    scene.add_capsule("limb", 0.05, 0.3, _pose(np.array([0.6, 0.0, 0.5])), (1, 0, 0, 1),
+                      moving=True)
+    groups = (None, *(frozenset(g.links) for g in groups_js))
+    bid = scene["limb"].ids[0]
+    cp = ClosestPoints(scene.physics.client)
+    rng = np.random.default_rng(11)
+    q0 = robot.q()
+    n_exact = n_inf = 0
+    for _ in range(60):
+        robot.reset(q0 + rng.normal(0.0, 0.3, q0.shape))
+        r, a = rng.uniform(0.2, 1.2), rng.uniform(0.0, 2.0 * np.pi)
+        scene.move("limb", _pose(np.array([r * np.cos(a), r * np.sin(a), 0.6])))
+        truth = _brute(scene, robot.body, bid, groups, DISTANCE_CAP)
+        bounds = [t + rng.choice([-0.05, -1e-9, 1e-9, 0.05]) for t in truth]
+        hints = dict(cp._hint.get((robot.body, groups), {}))
+        got = cp.minima_of(robot.body, [bid], groups, DISTANCE_CAP, below=[bounds])[0]
+        if max(bounds) >= DISTANCE_CAP:  # asked in full: every value, its hint renewed
+            assert got == truth
+            continue
+        assert cp._hint.get((robot.body, groups), {}) == hints
+        for g, t, b in zip(got, truth, bounds, strict=True):
+            if t < b:
+                assert g == t
+                n_exact += 1
+            else:
+                assert g == math.inf
+                n_inf += 1
+        full = cp.minima_of(robot.body, [bid], groups, DISTANCE_CAP,
+                            below=[[DISTANCE_CAP] * len(groups)])[0]
+        assert full == truth
+    assert n_exact > 40 and n_inf > 40

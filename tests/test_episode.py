@@ -446,6 +446,43 @@ def test_log_every_thins_rows_but_not_the_loop(tmp_path: Path) -> None:
     assert thin.scene["trace_rows"]["log_every_control_steps"] == 10
 
 
+def _passing(tmp: Path, log_every: int):  # type: ignore[no-untyped-def]
+    """A held CRS-A465; a box and a two-part compound sweep past it, both touching it
+    between two 10-step rows, then move away."""
+    scene = _scene(tmp)
+    robot = scene.add_urdf("crs", crs_urdf_path(), CRS_JOINTS, CRS_LIMITS)
+    robot.reset(Q0)
+    scene.add_box("box", (0.05, 0.05, 0.05), trans(1.0, 0.0, 0.05), GREY, moving=True)
+    scene.add_compound("pair", [Part("box", (0.04, 0.04, 0.04), trans(0.0, -0.05, 0.0)),
+                                Part("box", (0.04, 0.04, 0.04), trans(0.0, 0.05, 0.0))],
+                       trans(0.0, 1.0, 0.3), GREY, moving=True)
+
+    def ctrl(obs: Observation) -> StepResult:
+        return StepResult({"crs": robot.gravity_torques(obs.q["crs"])})
+
+    movers = {"box": lambda t: trans(0.115 + 40.0 * (t - 0.0437) ** 2, 0.0, 0.05),
+              "pair": lambda t: trans(0.0, 0.05 + 50.0 * (t - 0.061) ** 2, 0.3)}
+    ep = Episode(scene, {"crs": TorqueDrive(robot)}, ctrl, Columns(), 0.1, movers=movers,
+                 log_every=log_every)
+    return _run(ep, tmp)
+
+
+def test_steps_without_a_row_keep_every_minimum_and_event(tmp_path: Path) -> None:
+    """Between rows the runner asks only for distances below their running minima
+    (Scene.distance_table's ``below``): the minima over all steps (values and times), the
+    collision events (their steps) and the rows are those of a run that logs every step."""
+    full = _passing(tmp_path / "full", 1)
+    thin = _passing(tmp_path / "thin", 10)
+    assert (thin.manifest["summary"]["min_over_all_steps"]
+            == full.manifest["summary"]["min_over_all_steps"])
+    assert thin.events.to_dict("records") == full.events.to_dict("records")
+    assert set(thin.events["kind"]) == {"collision"} and len(thin.events) == 2
+    assert all(k % 10 for k in thin.events["step"])  # both touch between two rows
+    merged = full.trace.set_index("step").loc[thin.trace["step"]]
+    for col in ("dist_box", "dist_pair", "dist_min"):
+        np.testing.assert_array_equal(merged[col].to_numpy(), thin.trace[col].to_numpy())
+
+
 def test_log_every_keeps_the_last_step(tmp_path: Path) -> None:
     thin = _thinned(tmp_path, 7, duration=0.05)
     assert thin.trace["step"].tolist() == [0, 7, 14, 21, 28, 35, 42, 49, 50]

@@ -132,15 +132,24 @@ class ClosestPoints:
         return self.minima_of(body_a, (body_b,), groups, cap)[0]
 
     def minima_of(self, body_a: int, bodies_b: Sequence[int], groups: tuple[Links, ...],
-                  cap: float, joints_a: tuple[Sequence[int], np.ndarray] | None = None
-                  ) -> list[list[float]]:
+                  cap: float, joints_a: tuple[Sequence[int], np.ndarray] | None = None,
+                  below: Sequence[Sequence[float]] | None = None) -> list[list[float]]:
         """:meth:`minima` of ``body_a`` against each of ``bodies_b`` in turn (the runner's
         every-step form: the groups' membership and the hints found once for all).
         ``joints_a``: the PyBullet indices of every movable joint of ``body_a`` (a fixed-base
         body) and their positions now, if the caller has them: then A's box is kept between
         steps and grown by how far the joints can have moved its shapes
         (:meth:`repro.sim.link_boxes.LinkBoxes.moving_box`), instead of being asked of
-        PyBullet at every step."""
+        PyBullet at every step.
+
+        ``below``: for each of ``bodies_b``, a bound per group [m]: then only the groups
+        closer than their bound need their value (a caller that keeps running minima and
+        logs the values on some steps only). A body whose bounds are all below ``cap`` is
+        asked with a threshold of their largest (every link closer is returned, so a group
+        with a point below its bound has its minimum): a group's answer is its exact value
+        where that is below its bound, else ``inf`` ("not below"), and the full queries'
+        hint is neither used nor changed. Any other body is answered as without ``below``
+        (every value exact; ``cap`` for one proved beyond the cap)."""
         key = (body_a, groups)
         hints = self._hint.get(key)
         if hints is None:
@@ -151,7 +160,7 @@ class ClosestPoints:
         ask, client, kept = p.getClosestPoints, self.client, self._kept_box
         box_a: tuple[list[float], list[float]] | None = None
         out = []
-        for body_b in bodies_b:
+        for ib, body_b in enumerate(bodies_b):
             threshold = hints.get(body_b, cap)
             if threshold >= cap and body_b in hints and self.boxes.one_link(body_b):
                 # beyond the cap at the last query: are the boxes still far apart?
@@ -167,6 +176,16 @@ class ClosestPoints:
                     self.skipped += 1
                     out.append([cap] * members.n)
                     continue  # (the hint stays: cap + HINT_MARGIN)
+            if below is not None:
+                bounds = below[ib]
+                if all(b < cap for b in bounds):  # (no NaN, none needing its value in full)
+                    top = max(bounds)
+                    mins = _minima(ask(body_a, body_b, max(top, 0.0), physicsClientId=client),
+                                   members)
+                    self.queries += 1
+                    out.append([m if m < b else math.inf
+                                for m, b in zip(mins, bounds, strict=True)])
+                    continue
             mins = _minima(ask(body_a, body_b, threshold, physicsClientId=client), members)
             self.queries += 1
             if threshold < cap:

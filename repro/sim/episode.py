@@ -468,6 +468,9 @@ class _Runner:
         #: per (column prefix, bodies): the distance columns, which bodies are obstacles and
         #: their running minima
         self._dist_cols: dict[tuple[str, tuple[str, ...]], _DistanceColumns] = {}
+        #: (number of scene bodies, each joint set's running minima) of the last step: the
+        #: bounds of the next step's distances when it writes no row (ground_truth)
+        self._gt_minima: tuple[int, list[list[float]]] | None = None
 
     def onset(self, key: str, now: bool, t: float, k: int, kind: str,
               detail: str | Callable[[], str],
@@ -584,9 +587,18 @@ class _Runner:
         columns and the moving bodies' poses only into a row that is written (``row`` not
         None)."""
         scene = self.ep.scene
+        # a step that writes no row needs a distance only where it is below its running
+        # minimum (a new minimum, a first touch): asked so (the values of the rows and
+        # every minimum and event are the same; Scene.distance_table)
+        kept = self._gt_minima
+        below = (kept[1] if row is None and kept is not None and kept[0] == len(scene.bodies)
+                 else None)
+        minima = []
         for (name, robot), (bodies, dists) in zip(
-                self._groups, scene.distance_table(self._group_sets), strict=True):
+                self._groups, scene.distance_table(self._group_sets, below=below),
+                strict=True):
             cols = self._distance_columns(robot.column_prefix, bodies)
+            minima.append(cols.minima.best)
             d_min = min([dists[i] for i in cols.obstacles], default=math.nan)
             if cols.minima.update([*dists, d_min], t):  # a body touched
                 for body, di in zip(bodies, dists, strict=True):
@@ -601,6 +613,7 @@ class _Runner:
             if row is not None:
                 row.update(zip(cols.names, dists, strict=True))
                 row[cols.name_min] = d_min
+        self._gt_minima = (len(scene.bodies), minima)
         if row is None:
             return
         for moving in scene.moving_bodies():

@@ -24,6 +24,7 @@ position [m] and quaternion (x, y, z, w).
 
 from __future__ import annotations
 
+import math
 import shutil
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
@@ -535,10 +536,18 @@ class Scene:
         return [dict(zip(names, values, strict=True))
                 for names, values in self.distance_table(robots, max_distance)]
 
-    def distance_table(self, robots: Sequence[JointSet], max_distance: float = DISTANCE_CAP
+    def distance_table(self, robots: Sequence[JointSet], max_distance: float = DISTANCE_CAP,
+                       below: Sequence[Sequence[float]] | None = None
                        ) -> list[tuple[tuple[str, ...], list[float]]]:
         """:meth:`distances_of` as, per robot, the other bodies' names and the distances [m]
-        in that order (the runner's every-step form: no dictionaries)."""
+        in that order (the runner's every-step form: no dictionaries).
+
+        ``below``: per robot, a bound [m] per other body in the order of the names this
+        returns (a longer list is fine: its first entries count), e.g. the running minimum
+        of each distance column: then a distance is exact where it is below its bound, and
+        elsewhere a value that is not below it (``inf``, or the exact one:
+        :meth:`repro.sim.closest.ClosestPoints.minima_of`); the caller must have had the
+        names from an earlier call since the last body was added."""
         key = tuple(id(r) for r in robots)
         plan = self._distance_plans.get(key)
         if plan is None:
@@ -558,14 +567,21 @@ class Scene:
             names, ids, spans = self._others(full)
             # the chain's joints now (its box is then kept between steps: ClosestPoints)
             joints = (full.pb_joints, full.q()) if isinstance(full, Robot) else None
-            per_body = minima_of(full.body, ids, groups, cap, joints)  # [id][group]
+            bounds = None
+            if below is not None:  # [id][group]: each part of a body has the body's bound
+                per_name = [[below[i][b] for i in idx] for b in range(len(names))]
+                bounds = per_name if spans is None else [
+                    per_name[b] for b, (start, stop) in enumerate(spans)
+                    for _ in range(start, stop)]
+            per_body = minima_of(full.body, ids, groups, cap, joints, bounds)  # [id][group]
             if spans is None:  # one PyBullet body per scene body
                 values = [list(col) for col in zip(*per_body, strict=True)] if per_body else [
                     [] for _ in idx]
             else:  # a compound body: the minimum over its parts
                 values = [[] for _ in idx]
+                fill = cap if below is None else math.inf
                 for start, stop in spans:
-                    best = [cap] * len(idx)
+                    best = [fill] * len(idx)
                     for mins in per_body[start:stop]:
                         for j, d in enumerate(mins):
                             if d < best[j]:
