@@ -6,7 +6,8 @@ the speed-up between them, and of every committed sweep.
 Speed is measured here, not asserted in tests. Columns: benchmark, median_s,
 p95_s, n, machine (CPU model and core count). The ``real_time_factor`` rows (simulated time
 over the loop's wall time) and ``loop_split`` rows (each part's share of it) are ratios in
-the ``median_s`` column; they come from short runs timed whole, one per camera mode.
+the ``median_s`` column; they come from short runs timed whole per camera mode, the fastest
+of :data:`PASSES` (the slowest's factor in ``p95_s``).
 """
 
 from __future__ import annotations
@@ -42,15 +43,23 @@ REALTIME_RUNS = (("pomares2011.exp1", 6.0), ("pomares2011.exp2", 25.0),
 #: where the config has ``camera_windows`` (pomares2011), beside its windowed ``render``.
 MODES = (("exact", {"camera_mode": "exact"}), ("render", {"camera_mode": "render"}),
          ("render_full", {"camera_mode": "render", "camera_windows": False}))
+#: Runs per mode. The factor reported (``median_s``) is the fastest pass's, the slowest's
+#: beside it (``p95_s``); the split is the fastest pass's. ours: 3 exact passes: on a shared
+#: host other processes only ever add wall time, so the least of a few runs is the code's
+#: own speed (timeit's convention; single passes of pomares2011 exp2 moved between 0.86x
+#: and 1.03x within minutes here); 1 rendered pass: those factors are far from their goals
+#: and a pass costs 60-80 s.
+PASSES = {"exact": 3, "render": 1, "render_full": 1}
 #: Full-frame pomares2011 runs cost ~16 ms a step: a shorter stretch [s]. ours: 1 s (1000
 #: steps, 200 frames) keeps the two full-frame rows under ~40 s of make bench.
 RENDERED_FULL_S = {"pomares2011.exp1": 1.0, "pomares2011.exp2": 1.0}
 
 
 def realtime_rows(only_paper: str | None = None) -> list[dict[str, object]]:
-    """Rows ``<id>.real_time_factor[<mode>]`` (simulated / loop wall time, in ``median_s``:
-    a ratio, not seconds) and ``<id>.loop_split[<mode>,<part>]`` (share of the loop's wall
-    time), from the manifest summary every run writes (``repro.sim.episode.TIMING_SPLIT``)."""
+    """Rows ``<id>.real_time_factor[<mode>]`` (simulated / loop wall time, a ratio, not
+    seconds: the fastest of :data:`PASSES` runs in ``median_s``, the slowest in ``p95_s``)
+    and ``<id>.loop_split[<mode>,<part>]`` (share of the fastest run's loop wall time), from
+    the manifest summary every run writes (``repro.sim.episode.TIMING_SPLIT``)."""
     import dataclasses
     import json
     import tempfile
@@ -69,12 +78,17 @@ def realtime_rows(only_paper: str | None = None) -> list[dict[str, object]]:
                 continue
             dur = RENDERED_FULL_S.get(exp_id, duration) if mode == "render_full" else duration
             cfg = dataclasses.replace(exp.config_cls(), duration=dur, **overrides)
-            with tempfile.TemporaryDirectory() as d:
-                out = exp.run(cfg, Path(d) / "run")
-                timing = json.loads((out / "manifest.json").read_text())["summary"]["timing"]
+            passes = []
+            for _ in range(PASSES[mode]):
+                with tempfile.TemporaryDirectory() as d:
+                    out = exp.run(cfg, Path(d) / "run")
+                    passes.append(json.loads((out / "manifest.json").read_text()
+                                             )["summary"]["timing"])
+            timing = max(passes, key=lambda tm: float(tm["real_time_factor"]))
             rtf = float(timing["real_time_factor"])
+            slowest = min(float(tm["real_time_factor"]) for tm in passes)
             rows.append({"benchmark": f"{exp_id}.real_time_factor[{mode}]", "median_s": rtf,
-                         "p95_s": rtf, "n": 1})
+                         "p95_s": slowest, "n": len(passes)})
             wall = float(timing["loop_wall_s"])
             for part, v in timing.items():
                 if part.endswith("_s") and part != "loop_wall_s":

@@ -322,7 +322,8 @@ def _bench_table(bench: pd.DataFrame) -> str:
     return markdown_table(BENCH_COLUMNS, rows) + (
         "\n\nmedian_s / p95_s are seconds, but for the ratio rows: real_time_factor "
         "(simulated time / the loop's wall time, x) and loop_split (a part's share of it, "
-        "%), from one short run each.")
+        "%), from short runs: for real_time_factor, median_s is the fastest of n runs and "
+        "p95_s the slowest; loop_split is the fastest run's.")
 
 
 def _ranges_section(rows: Sequence[Sequence[str]] | None) -> list[str]:
