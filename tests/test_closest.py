@@ -264,3 +264,45 @@ def test_below_bounds_give_the_exact_value_only_where_it_is_below(scene: Scene) 
                             below=[[DISTANCE_CAP] * len(groups)])[0]
         assert full == truth
     assert n_exact > 40 and n_inf > 40
+
+
+def test_far_bodies_are_proved_beyond_the_cap_together(scene: Scene,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """Kept bodies beyond the cap at their last query are tested together, by one box
+    holding theirs: three limbs out of reach cost no query and no box per step; one moved
+    within reach is asked (the union is stale after a move) and answered as the full query."""
+    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
+    names = ("l1", "l2", "l3")
+    for i, n in enumerate(names):
+        scene.add_capsule(n, 0.05, 0.3, _pose(np.array([3.0, 0.3 * i, 0.5])), (1, 0, 0, 1),
+                          moving=True)
+    ids = {n: scene[n].ids[0] for n in names}
+    asked: list[int] = []
+    real_aabb = p.getAABB
+
+    def counting_aabb(body: int, link: int = -1, **kw: int) -> tuple:
+        asked.append(body)
+        return real_aabb(body, link, **kw)
+
+    monkeypatch.setattr("repro.sim.closest.p.getAABB", counting_aabb)
+    cp = scene._closest
+
+    def check() -> None:
+        got = scene.distances(robot)
+        for n in names:
+            assert got[n] == _brute(scene, robot.body, ids[n], (None,), DISTANCE_CAP)[0]
+
+    check()  # first queries: all three far
+    check()  # their boxes asked, once
+    asked.clear()
+    q0, s0 = cp.queries, cp.skipped
+    for _ in range(5):
+        check()
+    assert cp.queries == q0 and cp.skipped == s0 + 15
+    assert not set(asked) & set(ids.values())  # (the limbs' boxes: kept)
+    scene.move("l2", _pose(np.array([0.5, 0.2, 0.5])))  # within reach
+    check()
+    assert cp.queries > q0
+    scene.move("l2", _pose(np.array([3.0, 0.3, 0.5])))
+    for _ in range(3):
+        check()

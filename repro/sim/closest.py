@@ -110,19 +110,41 @@ class ClosestPoints:
         #: bodies that move only when the owner says so (:meth:`moved`): their PyBullet box,
         #: kept from the far test that asked it until they move (None: not asked since)
         self._kept_box: dict[int, tuple[list[float], list[float]] | None] = {}
+        self._moves = 0  # moves of kept bodies so far (a union of kept boxes is then stale)
+        #: (body A, groups) -> (moves, the bodies, the box holding their kept boxes)
+        self._far_union: dict[tuple[int, tuple[Links, ...]],
+                              tuple[int, tuple[int, ...], tuple[list[float], list[float]]]] = {}
         self.queries = 0  # getClosestPoints calls made (for tests and benchmarks)
         self.skipped = 0  # pairs proved beyond the cap by their boxes (no query)
 
     def keep_box(self, body: int) -> None:
         """``body`` moves only through its owner, who calls :meth:`moved` after each move
         (a scene's static and scripted bodies, not a dynamic one): the far test asks its box
-        once per pose instead of once per query."""
-        self._kept_box.setdefault(body, None)
+        once per pose instead of once per query. Only a body of one link (its base) is
+        kept; any other is asked as before."""
+        if self.boxes.one_link(body):
+            self._kept_box.setdefault(body, None)
 
     def moved(self, body: int) -> None:
         """``body`` (see :meth:`keep_box`) was moved: its box is asked again."""
         if body in self._kept_box:
             self._kept_box[body] = None
+            self._moves += 1
+
+    def _box_of(self, bodies: Sequence[int]) -> tuple[list[float], list[float]]:
+        """The smallest box holding the PyBullet boxes of the kept ``bodies`` (each asked
+        once per pose, :meth:`keep_box`)."""
+        kept, client = self._kept_box, self.client
+        lo, hi = [math.inf] * 3, [-math.inf] * 3
+        for b in bodies:
+            box = kept.get(b)
+            if box is None:
+                box = kept[b] = p.getAABB(b, -1, physicsClientId=client)
+            if not all(map(math.isfinite, (*box[0], *box[1]))):  # (never a proof from it)
+                return [-math.inf] * 3, [math.inf] * 3
+            lo = [min(x, y) for x, y in zip(lo, box[0], strict=True)]
+            hi = [max(x, y) for x, y in zip(hi, box[1], strict=True)]
+        return lo, hi
 
     def minima(self, body_a: int, body_b: int, groups: tuple[Links, ...], cap: float
                ) -> list[float]:
@@ -159,9 +181,25 @@ class ClosestPoints:
             members = self._members[groups] = _Members(groups)
         ask, client, kept = p.getClosestPoints, self.client, self._kept_box
         box_a: tuple[list[float], list[float]] | None = None
+        # the kept bodies beyond the cap at their last query, proved still so together when
+        # one box holding all of theirs is (a person out of reach: one test, not twelve)
+        far = tuple(b for b in bodies_b if hints.get(b, 0.0) >= cap and b in kept)
+        proved: tuple[int, ...] = ()
+        if len(far) > 1:
+            box_a = (self.boxes.box(body_a) if joints_a is None
+                     else self.boxes.moving_box(body_a, *joints_a))
+            union = self._far_union.get(key)
+            if union is None or union[0] != self._moves or union[1] != far:
+                union = self._far_union[key] = (self._moves, far, self._box_of(far))
+            if box_gap(box_a, *union[2]) > cap + FAR_MARGIN:
+                proved = far
         out = []
         for ib, body_b in enumerate(bodies_b):
             threshold = hints.get(body_b, cap)
+            if proved and body_b in proved:
+                self.skipped += 1
+                out.append([cap] * members.n)
+                continue  # (the hint stays: cap + HINT_MARGIN)
             if threshold >= cap and body_b in hints and self.boxes.one_link(body_b):
                 # beyond the cap at the last query: are the boxes still far apart?
                 if box_a is None:
