@@ -253,3 +253,27 @@ def test_fcl_min_distance_skips_only_pairs_that_cannot_win(spread: float) -> Non
                  for _ in range(12)]
         set_b.append(set_b[3])  # an exact tie: the first of the two pairs wins
         assert min_distance(set_a, set_b, "fcl") == _fcl_every_pair(set_a, set_b)
+
+
+def test_capsules_that_come_back_keep_their_fcl_objects(monkeypatch: pytest.MonkeyPatch
+                                                        ) -> None:
+    """The fcl memo drops the least recently used first: a person's twelve capsules, asked
+    at every call beside four robot capsules that are new at every call, are built about
+    once each."""
+    from repro.planning import capsules as caps
+
+    rng = np.random.default_rng(3)
+    person = [Capsule(rng.normal(size=3), rng.normal(size=3), 0.05) for _ in range(12)]
+    built: list[int] = []
+    real = Capsule.fcl_object
+    monkeypatch.setattr(Capsule, "fcl_object", lambda c: (built.append(id(c)), real(c))[1])
+    caps._FCL_MEMO.clear()
+    for _ in range(40):
+        robot = [Capsule(rng.normal(size=3) + 3.0, rng.normal(size=3) + 3.0, 0.05)
+                 for _ in range(4)]
+        d, i, j = min_distance(robot, person, method="fcl")
+        assert d == min_distance(robot, person, method="analytic")[0] or abs(
+            d - min_distance(robot, person, method="analytic")[0]) < 1e-12
+    # (one left unused for a dozen calls, pruned, may be dropped and built again; a memo
+    # emptied when full builds them again every 13 calls: ~30)
+    assert sum(built.count(id(c)) for c in person) <= 15

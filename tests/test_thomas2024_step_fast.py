@@ -971,3 +971,25 @@ def test_readings_that_do_not_fit_the_rows_give_what_they_gave(tmp_path: Path) -
             assert got[1] == want[1] if got[0] == "raised" else same_fields(got[1], want[1])
     finally:
         scene.close()
+
+
+def test_finite_is_numpy_s_isfinite_all_on_every_shape_and_layout() -> None:
+    """kernels.finite: ``np.isfinite(a).all()`` on float64 arrays of every rank, contiguous
+    or strided, with a NaN or an infinity anywhere, and on other dtypes (NumPy's own)."""
+    from repro.control.kernels import finite
+
+    rng = np.random.default_rng(5)
+    bases = [rng.normal(size=(7,)), rng.normal(size=(6, 4)), rng.normal(size=(3, 4, 5)),
+             np.array(2.0), np.empty((0,)), np.array([-0.0, 1e308])]
+    for base in bases:
+        views = [base, base.T, base[::2] if base.ndim else base]
+        for a in views:
+            assert finite(a) == bool(np.isfinite(a).all())
+            for bad in (np.nan, np.inf, -np.inf):
+                if a.size:
+                    b = a.copy()
+                    b.flat[rng.integers(a.size)] = bad
+                    assert finite(b) is False
+                    assert finite(b.T) is False
+    assert finite(np.array([1, 2])) is True and finite(np.array([1.0, np.nan],
+                                                                dtype=np.float32)) is False

@@ -65,6 +65,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from repro.control.kernels import finite
 from repro.errors import ConfigError
 
 __all__ = ["Gains", "HybridVSConfig", "HybridVSController", "distance_gradient",
@@ -81,7 +82,7 @@ def _matrix(name: str, a: np.ndarray, shape: tuple[int | None, int | None]) -> n
     if a.ndim != 2 or any(want is not None and got != want
                           for got, want in zip(a.shape, shape, strict=True)):
         raise ValueError(f"{name} must have shape {shape} (None: any), got {a.shape}")
-    if not np.isfinite(a).all():
+    if not finite(a):
         raise ValueError(f"{name} must be finite; non-finite entries at "
                          f"{np.argwhere(~np.isfinite(a)).tolist()}")
     return a
@@ -91,7 +92,7 @@ def _vector(name: str, a: np.ndarray, n: int) -> np.ndarray:
     a = np.asarray(a, dtype=float).reshape(-1)
     if a.shape != (n,):
         raise ValueError(f"{name} must have {n} entries, got {a.shape[0]}")
-    if not np.isfinite(a).all():
+    if not finite(a):
         raise ValueError(f"{name} must be finite, got {a.tolist()}")
     return a
 

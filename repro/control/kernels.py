@@ -3,6 +3,8 @@ on the small arrays of a control step:
 
 - :func:`plain_dense`, :func:`all_finite3`: the filling and checks of a QP's data and the
   finiteness test of a solution in :meth:`repro.control.qp.QPSolver.solve`;
+- :func:`finite` (:func:`all_finite`): ``np.isfinite(a).all()`` in one call, for the input
+  checks of a control step (pomares2011's hybrid law, the runner's command check);
 - :func:`cbf_offsets`: the right-hand sides of :func:`repro.control.cbf_qp.cbf_inequalities`;
 - :func:`add_to_diagonal`: the ``+ mu I`` of :func:`repro.control.cbf_qp.ibvs_objective`.
 
@@ -61,6 +63,24 @@ def plain_dense(H: np.ndarray, g: np.ndarray, C: np.ndarray, l: np.ndarray, u: n
         if not (lo <= hi and lo < math.inf and hi > -math.inf):
             return False
     return True
+
+
+@njit(cache=True, error_model="numpy")
+def all_finite(a: np.ndarray) -> bool:
+    """Every entry of the float64 array ``a`` (any shape and layout) is finite: what
+    ``np.isfinite(a).all()`` says, in one call (~0.35 against ~2 us on a control step's
+    small arrays)."""
+    for v in a.flat:
+        if not math.isfinite(v):
+            return False
+    return True
+
+
+def finite(a: np.ndarray) -> bool:
+    """``np.isfinite(a).all()`` for any array: :func:`all_finite` on a float64 one."""
+    if type(a) is np.ndarray and a.dtype == np.float64:
+        return bool(all_finite(a))
+    return bool(np.isfinite(a).all())
 
 
 @njit(cache=True, error_model="numpy")

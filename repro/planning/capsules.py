@@ -42,6 +42,7 @@ Units: lengths [m]; points are 3-vectors in one common frame (the world, unless 
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -236,18 +237,23 @@ def _fcl_signed_distance(oa: fcl.CollisionObject, ob: fcl.CollisionObject) -> fl
 
 
 #: python-fcl objects of the capsules seen last, by id (each entry holds its capsule, so
-#: the id cannot be reused while it is here): a capsule that comes back (a still person's
-#: body, held between tracker samples) is not rebuilt. Same object, same distances.
-_FCL_MEMO: dict[int, tuple[Capsule, fcl.CollisionObject]] = {}
+#: the id cannot be reused while it is here), the least recently used dropped first: a
+#: capsule that comes back (a still person's body, held between tracker samples) is not
+#: rebuilt, and a robot's capsules, new at every call, do not push it out. Same object,
+#: same distances.
+_FCL_MEMO: OrderedDict[int, tuple[Capsule, fcl.CollisionObject]] = OrderedDict()
 _FCL_MEMO_SIZE = 64  # ours: a few skeletons' worth of capsules
 
 
 def _fcl_object_of(c: Capsule) -> fcl.CollisionObject:
     got = _FCL_MEMO.get(id(c))
     if got is not None and got[0] is c:
+        _FCL_MEMO.move_to_end(id(c))
         return got[1]
+    if got is not None:  # (an id of a capsule gone)
+        del _FCL_MEMO[id(c)]
     if len(_FCL_MEMO) >= _FCL_MEMO_SIZE:
-        _FCL_MEMO.clear()
+        _FCL_MEMO.popitem(last=False)
     obj = c.fcl_object()
     _FCL_MEMO[id(c)] = (c, obj)
     return obj

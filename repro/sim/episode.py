@@ -37,6 +37,7 @@ from typing import Any, Protocol
 import numpy as np
 import pybullet as p
 
+from repro.control.kernels import finite
 from repro.errors import ConfigError
 from repro.runs.columns import COLUMNS_FILE, Columns
 from repro.runs.signals import StepGuard
@@ -762,7 +763,7 @@ class _Runner:
                                else drive.safe_command(), dtype=float)
                 if failed_sensor is not None:
                     u = drive.safe_command()
-                if u.shape != (drive.robot.n,) or not np.isfinite(u).all():
+                if u.shape != (drive.robot.n,) or not finite(u):
                     rec.event(t, k, "nan_command", f"{name}: controller command {u.tolist()} "
                               "is not a finite vector of the right size; safe command sent, "
                               "run stopped")
