@@ -55,14 +55,44 @@ PASSES = {"exact": 3, "render": 1, "render_full": 1}
 RENDERED_FULL_S = {"pomares2011.exp1": 1.0, "pomares2011.exp2": 1.0}
 
 
+def run_timing(exp_id: str, duration: float, overrides: dict[str, object]
+               ) -> dict[str, float]:
+    """The manifest's ``timing`` summary of one run of ``exp_id`` (its default config with
+    ``duration`` [s] and ``overrides``), made in a fresh Python process, as ``repro run``
+    and ``repro results`` make each run: a run's speed does not depend on the runs timed
+    before it (in one process, pomares2011 exp1 went from 1.63x to 1.57x over four runs in a
+    row, and exp2 ran at 0.99x after a rendered run and at 1.065x alone, minutes apart)."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        subprocess.run([sys.executable, "-m", "repro.bench", "--one-run", exp_id,
+                        json.dumps({"duration": duration, **overrides}), d],
+                       check=True, stdout=subprocess.DEVNULL)
+        manifest = json.loads((Path(d) / "run" / "manifest.json").read_text())
+    return {k: float(v) for k, v in manifest["summary"]["timing"].items()}
+
+
+def _one_run(exp_id: str, fields_json: str, out_dir: Path) -> None:
+    """``--one-run``: the run :func:`run_timing` asks for, into ``out_dir/run``."""
+    import dataclasses
+    import json
+
+    from repro.runs.registry import find_experiment
+
+    exp = find_experiment(load_papers(), exp_id)
+    exp.run(dataclasses.replace(exp.config_cls(), **json.loads(fields_json)), out_dir / "run")
+
+
 def realtime_rows(only_paper: str | None = None) -> list[dict[str, object]]:
     """Rows ``<id>.real_time_factor[<mode>]`` (simulated / loop wall time, a ratio, not
     seconds: the fastest of :data:`PASSES` runs in ``median_s``, the slowest in ``p95_s``)
     and ``<id>.loop_split[<mode>,<part>]`` (share of the fastest run's loop wall time), from
-    the manifest summary every run writes (``repro.sim.episode.TIMING_SPLIT``)."""
+    the manifest summary every run writes (``repro.sim.episode.TIMING_SPLIT``), each run in
+    a fresh process (:func:`run_timing`)."""
     import dataclasses
-    import json
-    import tempfile
 
     from repro.runs.registry import find_experiment
 
@@ -77,22 +107,16 @@ def realtime_rows(only_paper: str | None = None) -> list[dict[str, object]]:
             if not set(overrides) <= fields:
                 continue
             dur = RENDERED_FULL_S.get(exp_id, duration) if mode == "render_full" else duration
-            cfg = dataclasses.replace(exp.config_cls(), duration=dur, **overrides)
-            passes = []
-            for _ in range(PASSES[mode]):
-                with tempfile.TemporaryDirectory() as d:
-                    out = exp.run(cfg, Path(d) / "run")
-                    passes.append(json.loads((out / "manifest.json").read_text()
-                                             )["summary"]["timing"])
-            timing = max(passes, key=lambda tm: float(tm["real_time_factor"]))
-            rtf = float(timing["real_time_factor"])
-            slowest = min(float(tm["real_time_factor"]) for tm in passes)
+            passes = [run_timing(exp_id, dur, dict(overrides)) for _ in range(PASSES[mode])]
+            timing = max(passes, key=lambda tm: tm["real_time_factor"])
+            rtf = timing["real_time_factor"]
+            slowest = min(tm["real_time_factor"] for tm in passes)
             rows.append({"benchmark": f"{exp_id}.real_time_factor[{mode}]", "median_s": rtf,
                          "p95_s": slowest, "n": len(passes)})
-            wall = float(timing["loop_wall_s"])
+            wall = timing["loop_wall_s"]
             for part, v in timing.items():
                 if part.endswith("_s") and part != "loop_wall_s":
-                    share = float(v) / wall
+                    share = v / wall
                     rows.append({"benchmark": f"{exp_id}.loop_split[{mode},{part[:-2]}]",
                                  "median_s": share, "p95_s": share, "n": 1})
     return rows
@@ -144,7 +168,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m repro.bench")
     parser.add_argument("--results", type=Path, default=Path("results"))
     parser.add_argument("--paper", default=None)
+    parser.add_argument("--one-run", nargs=3, metavar=("EXPERIMENT", "FIELDS_JSON", "DIR"),
+                        help=argparse.SUPPRESS)  # one timed run (run_timing's child)
     args = parser.parse_args(argv)
+    if args.one_run:
+        _one_run(args.one_run[0], args.one_run[1], Path(args.one_run[2]))
+        return 0
     machine = f"{cpu_name()} ({os.cpu_count()} cores)"
     rows: list[dict[str, object]] = []
     rows += [{**r, "machine": machine} for r in realtime_rows(args.paper)]
