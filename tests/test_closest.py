@@ -42,6 +42,31 @@ def scene():  # type: ignore[no-untyped-def]
         s.close()
 
 
+def _arm_hand_limb(scene: Scene, x: float) -> tuple:
+    """The PA-10 chain with its arm and hand groups, and a capsule limb at ``x`` [m]: the
+    robot, the groups (None: every link) and the limb's PyBullet id."""
+    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
+    groups_js = [scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True),
+                 scene.add_joint_group("pa10", "hand", HAND_JOINTS, "bh8_")]
+    scene.add_capsule("limb", 0.05, 0.3, _pose(np.array([x, 0.0, 0.5])), (1, 0, 0, 1),
+                      moving=True)
+    return robot, (None, *(frozenset(g.links) for g in groups_js)), scene["limb"].ids[0]
+
+
+@pytest.fixture()
+def aabb_asked(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The bodies whose box is asked of PyBullet (``getAABB``), in order."""
+    asked: list[int] = []
+    real = p.getAABB
+
+    def counting(body: int, link: int = -1, **kw: int) -> tuple:
+        asked.append(body)
+        return real(body, link, **kw)
+
+    monkeypatch.setattr("repro.sim.closest.p.getAABB", counting)
+    return asked
+
+
 def _pose(xyz: np.ndarray) -> np.ndarray:
     T = np.eye(4)
     T[:3, 3] = xyz
@@ -111,13 +136,7 @@ def test_bodies_beyond_the_cap_are_proved_so_by_boxes(scene: Scene) -> None:
     moves: the answers with the box test equal the full query's to the bit, bodies far
     beyond the cap are not asked, and one just beyond it is (its boxes are within
     cap + FAR_MARGIN)."""
-    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
-    groups_js = [scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True),
-                 scene.add_joint_group("pa10", "hand", HAND_JOINTS, "bh8_")]
-    scene.add_capsule("limb", 0.05, 0.3, _pose(np.array([3.0, 0.0, 0.5])), (1, 0, 0, 1),
-                      moving=True)
-    groups = (None, *(frozenset(g.links) for g in groups_js))
-    bid = scene["limb"].ids[0]
+    robot, groups, bid = _arm_hand_limb(scene, 3.0)
     cp = ClosestPoints(scene.physics.client)
     rng = np.random.default_rng(7)
     q0 = robot.q()
@@ -198,8 +217,8 @@ def test_a_kept_robot_box_grown_by_the_joint_motion_holds_the_fresh_box(scene: S
     assert 5 < made < 150 and cp.skipped > 20
 
 
-def test_a_kept_box_follows_every_move_of_its_body(scene: Scene,
-                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_kept_box_follows_every_move_of_its_body(scene: Scene, aabb_asked: list[int]
+                                                   ) -> None:
     """The scene's static and scripted bodies keep their PyBullet box between moves (the far
     test asks it once per pose): a limb moved in and out of the cap by ``Scene.move`` gives
     the full query's answer at every step, and its box is asked only after it moved."""
@@ -207,14 +226,7 @@ def test_a_kept_box_follows_every_move_of_its_body(scene: Scene,
     scene.add_capsule("limb", 0.05, 0.3, _pose(np.array([3.0, 0.0, 0.5])), (1, 0, 0, 1),
                       moving=True)
     bid = scene["limb"].ids[0]
-    asked: list[int] = []
-    real_aabb = p.getAABB
-
-    def counting_aabb(body: int, link: int = -1, **kw: int) -> tuple:
-        asked.append(body)
-        return real_aabb(body, link, **kw)
-
-    monkeypatch.setattr("repro.sim.closest.p.getAABB", counting_aabb)
+    asked = aabb_asked
     cp = scene._closest
     for k, r in enumerate([3.0, 3.0, 3.0, 0.4, 3.0, 3.0, 1.02, 3.0]):
         scene.move("limb", _pose(np.array([r, 0.1 * k, 0.6])))
@@ -230,13 +242,7 @@ def test_below_bounds_give_the_exact_value_only_where_it_is_below(scene: Scene) 
     """``below``: each group's value is the full query's where it is below the group's
     bound and ``inf`` where it is not; a body with a bound at the cap is answered in full;
     a body asked below its bounds leaves the hints of full queries as they were."""
-    robot = scene.add_urdf("pa10", pa10_urdf_path(), ALL_JOINTS, ALL_LIMITS, np.eye(4))
-    groups_js = [scene.add_joint_group("pa10", "arm", PA10_JOINTS, "pa10_", owns_base=True),
-                 scene.add_joint_group("pa10", "hand", HAND_JOINTS, "bh8_")]
-    scene.add_capsule("limb", 0.05, 0.3, _pose(np.array([0.6, 0.0, 0.5])), (1, 0, 0, 1),
-                      moving=True)
-    groups = (None, *(frozenset(g.links) for g in groups_js))
-    bid = scene["limb"].ids[0]
+    robot, groups, bid = _arm_hand_limb(scene, 0.6)
     cp = ClosestPoints(scene.physics.client)
     rng = np.random.default_rng(11)
     q0 = robot.q()
@@ -266,8 +272,8 @@ def test_below_bounds_give_the_exact_value_only_where_it_is_below(scene: Scene) 
     assert n_exact > 40 and n_inf > 40
 
 
-def test_far_bodies_are_proved_beyond_the_cap_together(scene: Scene,
-                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+def test_far_bodies_are_proved_beyond_the_cap_together(scene: Scene, aabb_asked: list[int]
+                                                       ) -> None:
     """Kept bodies beyond the cap at their last query are tested together, by one box
     holding theirs: three limbs out of reach cost no query and no box per step; one moved
     within reach is asked (the union is stale after a move) and answered as the full query."""
@@ -277,14 +283,7 @@ def test_far_bodies_are_proved_beyond_the_cap_together(scene: Scene,
         scene.add_capsule(n, 0.05, 0.3, _pose(np.array([3.0, 0.3 * i, 0.5])), (1, 0, 0, 1),
                           moving=True)
     ids = {n: scene[n].ids[0] for n in names}
-    asked: list[int] = []
-    real_aabb = p.getAABB
-
-    def counting_aabb(body: int, link: int = -1, **kw: int) -> tuple:
-        asked.append(body)
-        return real_aabb(body, link, **kw)
-
-    monkeypatch.setattr("repro.sim.closest.p.getAABB", counting_aabb)
+    asked = aabb_asked
     cp = scene._closest
 
     def check() -> None:
