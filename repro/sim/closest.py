@@ -32,6 +32,12 @@ no point, and the answer is ``cap`` for every group, as asked (:mod:`repro.sim.l
 A's box is kept between steps when the caller gives A's joints, grown by a bound on how far
 they can have moved any of its shapes).
 
+The bodies beyond the cap at their last query whose boxes the owner keeps between moves
+(:meth:`ClosestPoints.keep_box`: a scene's static and scripted bodies) are tested together,
+with one box holding theirs. A caller that needs a distance only where it is below a bound
+(the runner between trace rows: below its running minimum) passes the bounds
+(``minima_of(below=)``): the body is then asked with their largest as the threshold.
+
 Only the time changes (``make bench``).
 """
 
