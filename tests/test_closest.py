@@ -305,3 +305,4 @@ def test_far_bodies_are_proved_beyond_the_cap_together(scene: Scene, aabb_asked:
     scene.move("l2", _pose(np.array([3.0, 0.3, 0.5])))
     for _ in range(3):
         check()
+

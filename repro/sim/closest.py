@@ -189,7 +189,7 @@ class ClosestPoints:
         box_a: tuple[list[float], list[float]] | None = None
         # the kept bodies beyond the cap at their last query, proved still so together when
         # one box holding all of theirs is (a person out of reach: one test, not twelve)
-        far = tuple(b for b in bodies_b if hints.get(b, 0.0) >= cap and b in kept)
+        far = tuple(b for b in bodies_b if hints.get(b, -math.inf) >= cap and b in kept)
         proved: tuple[int, ...] = ()
         if len(far) > 1:
             box_a = (self.boxes.box(body_a) if joints_a is None
