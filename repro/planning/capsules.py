@@ -250,8 +250,6 @@ def _fcl_object_of(c: Capsule) -> fcl.CollisionObject:
     if got is not None and got[0] is c:
         _FCL_MEMO.move_to_end(id(c))
         return got[1]
-    if got is not None:  # (an id of a capsule gone)
-        del _FCL_MEMO[id(c)]
     if len(_FCL_MEMO) >= _FCL_MEMO_SIZE:
         _FCL_MEMO.popitem(last=False)
     obj = c.fcl_object()
