@@ -341,6 +341,24 @@ def _reference_qp(ctrl: Thomas2024Controller, q: np.ndarray, uv: np.ndarray, Z: 
     return G, cfg.lambda_4p * J_4p.T @ e_4p, A, b
 
 
+def replayed_inputs(ep, df: pd.DataFrame):  # type: ignore[no-untyped-def]
+    """For each row of a committed thomas2024 trace ``df``: the robot (and case 3's hand)
+    put where the row has them in ``ep``'s scene, then ``(k, q, uv, found, Z, readings)``,
+    the inputs of ``Thomas2024Controller.step`` there (the exact camera's measurement, every
+    ring's reading). The caller closes the scene."""
+    rig, scene = ep.cameras[0], ep.scene
+    target = scene[rig.target]
+    assert target.dot_target is not None
+    movers = _mover_poses(df, ["hand"])
+    for k, q in enumerate(df[[f"q{i}" for i in range(1, 8)]].to_numpy(dtype=float)):
+        rig.robot.reset(q)
+        for name, poses in movers.items():
+            scene.move(name, poses[k])
+        uv, found, Z = rig.camera.measure(scene.render_client, rig.pose(q),
+                                          target.dot_target, target.T_world)
+        yield k, q, uv, found, Z, [s.read(0.0, {rig.robot.name: q}) for s in ep.sensors]
+
+
 @pytest.mark.parametrize(("case", "models", "solver"), [
     ("case1", None, "proxsuite"), ("case2", None, "proxsuite"),
     ("case2", ("exact", "exact"), "daqp"), ("case3", None, "daqp")])
@@ -365,19 +383,9 @@ def test_controller_qp_and_stop_test_equal_the_previous_code_to_the_bit(
         return solve(problem)
 
     ctrl.qp.hard.solve = recording  # type: ignore[method-assign]
-    rig, scene = ep.cameras[0], ep.scene
-    target = scene[rig.target]
-    assert target.dot_target is not None
-    movers = _mover_poses(df, ["hand"])
     n_estimated = 0
     try:
-        for k, q in enumerate(df[[f"q{i}" for i in range(1, 8)]].to_numpy(dtype=float)):
-            rig.robot.reset(q)
-            for name, poses in movers.items():
-                scene.move(name, poses[k])
-            uv, found, Z = rig.camera.measure(scene.render_client, rig.pose(q),
-                                              target.dot_target, target.T_world)
-            readings = [s.read(0.0, {rig.robot.name: q}) for s in ep.sensors]
+        for _, q, uv, found, Z, readings in replayed_inputs(ep, df):
             out = ctrl.step(q, uv, found, Z, readings)
             if out.status == "no_features":
                 continue
@@ -392,7 +400,7 @@ def test_controller_qp_and_stop_test_equal_the_previous_code_to_the_bit(
                 r = p.g - p.C.T @ out.kappa
                 assert out.grad_L0 == math.sqrt(r @ r)
     finally:
-        scene.close()
+        ep.scene.close()
     assert len(problems) >= 20
     if models is not None:
         assert n_estimated > 0, "no estimated normal reached the QP"

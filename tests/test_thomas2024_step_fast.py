@@ -28,10 +28,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
+from test_thomas2024_speed import _random_problem, replayed_inputs
 
 import experiments.thomas2024.config as C
 from experiments.thomas2024 import scene as sc
-from experiments.thomas2024.bench import _mover_poses
 from experiments.thomas2024.run import CAMERA_LINK, StepOutput, Thomas2024Controller, build
 from repro.control import kernels
 from repro.control import qp as Q
@@ -675,15 +675,9 @@ def test_the_interaction_matrix_kernel_equals_the_numpy_rows() -> None:
 # --------------------------------------------------------------------------------------
 
 def _problem(rng: np.random.Generator, n: int, m: int) -> QPProblem:
-    """A CBF-like QP, feasible by construction, rows mostly one-sided (as in
-    tests/test_thomas2024_speed.py), often changed to stress a check or a status."""
-    J = rng.normal(size=(8, n))
-    qd = rng.uniform(1.0, 3.0, n)
-    x0 = rng.uniform(-0.5, 0.5, n) * qd
-    C = rng.normal(size=(m, n))
-    l = C @ x0 - rng.uniform(0.0, 0.3, m)
-    u = np.where(rng.random(m) < 0.7, np.inf, C @ x0 + rng.uniform(0.0, 0.3, m))
-    p = QPProblem(J.T @ J + 0.01 * np.eye(n), 5.0 * rng.normal(size=n), C, l, u, -qd, qd)
+    """A CBF-like QP, feasible by construction, rows mostly one-sided
+    (tests/test_thomas2024_speed.py's), often changed to stress a check or a status."""
+    p = _random_problem(rng, n, m)
     return _perturbed(rng, p) if rng.random() < 0.5 else p
 
 
@@ -862,26 +856,16 @@ def _replay(cfg: C.Thomas2024Config, df: pd.DataFrame, tmp: Path,
         for qp in (ctrl.qp.hard, ctrl.qp.relaxed):
             if qp is not None:
                 qp._backend = Recorder(qp._backend)  # type: ignore[assignment]
-    rig, scene = ep.cameras[0], ep.scene
-    target = scene[rig.target]
-    assert target.dot_target is not None
-    movers = _mover_poses(df, ["hand"])
     outs = []
     try:
-        for k, q in enumerate(df[[f"q{i}" for i in range(1, 8)]].to_numpy(dtype=float)):
-            rig.robot.reset(q)
-            for name, poses in movers.items():
-                scene.move(name, poses[k])
-            uv, found, Z = rig.camera.measure(scene.render_client, rig.pose(q),
-                                              target.dot_target, target.T_world)
+        for k, q, uv, found, Z, readings in replayed_inputs(ep, df):
             if k in (5, 6):
                 found = found.copy()
                 found[k - 5] = False
-            readings = [s.read(0.0, {rig.robot.name: q}) for s in ep.sensors]
             outs.append(step_before(ctrl, q, uv, found, Z, readings) if before
                         else ctrl.step(q, uv, found, Z, readings))
     finally:
-        scene.close()
+        ep.scene.close()
     return ctrl, outs
 
 

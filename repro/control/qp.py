@@ -215,14 +215,9 @@ def _plain(problem: QPProblem, n: int, m: int) -> _Arrays7 | None:
     (none None: :func:`_as_dense` would have nothing to convert, fill or reshape), else
     None."""
     H, g, C, l, u, lb, ub = problem
-    f64 = _F64
-    if (type(H) is np.ndarray and H.dtype == f64 and H.shape == (n, n)
-            and type(g) is np.ndarray and g.dtype == f64 and g.shape == (n,)
-            and type(C) is np.ndarray and C.dtype == f64 and C.shape == (m, n)
-            and type(l) is np.ndarray and l.dtype == f64 and l.shape == (m,)
-            and type(u) is np.ndarray and u.dtype == f64 and u.shape == (m,)
-            and type(lb) is np.ndarray and lb.dtype == f64 and lb.shape == (n,)
-            and type(ub) is np.ndarray and ub.dtype == f64 and ub.shape == (n,)):
+    f = _is_f64
+    if (f(H, (n, n)) and f(g, (n,)) and f(C, (m, n)) and f(l, (m,)) and f(u, (m,))
+            and f(lb, (n,)) and f(ub, (n,))):
         return H, g, C, l, u, lb, ub
     return None
 

@@ -45,16 +45,10 @@ SATURATIONS = ("clip", "scale")
 _F64 = np.dtype(float)
 
 
-def _all_finite(a: np.ndarray) -> bool:
-    """Every entry of ``a`` is finite: ``np.isfinite(a).all()``, in one compiled call for
-    a float64 array (:func:`repro.control.kernels.finite`)."""
-    return finite(a)
-
-
 def require_finite(name: str, a: np.ndarray) -> np.ndarray:
     """``a`` as a float array; raises :class:`NonFiniteInputError` naming the bad entries."""
     a = np.asarray(a, dtype=float)
-    if not _all_finite(a):
+    if not finite(a):
         bad = np.argwhere(~np.isfinite(a)).tolist()
         raise NonFiniteInputError(f"{name} must be finite; non-finite entries at {bad}")
     return a
@@ -144,7 +138,7 @@ class PointFeatureJacobian:
         self.cV_e.flags.writeable = False
         self.n_points = n_points
         self._checked = (self.cV_e.dtype == _F64 and self.cV_e.shape == (6, 6)
-                         and _all_finite(self.cV_e))
+                         and finite(self.cV_e))
         self._L = np.empty((2 * n_points, 6))  # L_s, rows x1, y1, x2, ... (C order)
 
     def __call__(self, xy: np.ndarray, Z: np.ndarray, eJ_e: np.ndarray) -> np.ndarray:
@@ -154,7 +148,7 @@ class PointFeatureJacobian:
         if (self._checked and type(xy) is np.ndarray and xy.dtype == _F64
                 and xy.shape == (N, 2) and type(Z) is np.ndarray and Z.dtype == _F64
                 and Z.shape == (N,) and type(eJ_e) is np.ndarray and eJ_e.dtype == _F64
-                and eJ_e.ndim == 2 and eJ_e.shape[0] == 6 and _all_finite(eJ_e)
+                and eJ_e.ndim == 2 and eJ_e.shape[0] == 6 and finite(eJ_e)
                 and self._fill(xy, Z, L_s)):
             return L_s @ (self.cV_e @ eJ_e)
         return feature_jacobian(interaction_matrix_points(xy, Z), self.cV_e, eJ_e)
