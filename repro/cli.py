@@ -153,6 +153,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="no Dask: the variants one after another in this process")
     p.set_defaults(func=_cmd_sweep)
 
+    p = sub.add_parser("counterfactual", help="rerun a sweep's variants that failed by one "
+                       "cause with only that cause removed (issue 37; "
+                       "results/sweeps/<exp>/counterfactuals/<name>/)")
+    _add_global_options(p, top_level=False)
+    p.add_argument("experiment", help="experiment id of a committed sweep, e.g. "
+                   "thomas2024.case1")
+    p.add_argument("name", help="the counterfactual (`repro list -v` names them)")
+    p.add_argument("--camera", choices=("exact", "render"), default="exact",
+                   help="the sweep it reruns (default: the exact-camera one)")
+    p.add_argument("-j", "--workers", type=_positive_int, default=None, metavar="N",
+                   help="LocalCluster workers (default: the number of cores)")
+    p.add_argument("--serial", action="store_true",
+                   help="no Dask: the variants one after another in this process")
+    p.set_defaults(func=_cmd_counterfactual)
+
     p = sub.add_parser("figures", help="draw figures and evaluate claims from the traces")
     _add_global_options(p, top_level=False)
     p.add_argument("--paper", metavar="P", default=None, help="only this paper")
@@ -712,6 +727,25 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     judged = sum(counts.values()) - failed - refused
     print(f"wrote {path} ({args.n} variants: {judged} judged, {refused} refused starts, "
           f"{failed} failed runs)")
+    return 0
+
+
+def _cmd_counterfactual(args: argparse.Namespace) -> int:
+    """Issue 37, item 3: ``repro counterfactual EXP NAME``."""
+    from repro.runs.causes import COUNTERFACTUALS_DIR
+    from repro.runs.sweep import cause_model, run_counterfactual
+
+    exp = registry.find_experiment(registry.load_papers(), args.experiment)
+    model = cause_model(registry.load_papers()[exp.paper])
+    if model is None:
+        raise ConfigError(f"{exp.paper} declares no causes, hence no counterfactual")
+    model.counterfactual(exp.name, args.name)  # an unknown name: the valid ones, now
+    check_dir_arg(args.results, "--results", must_exist=True)
+    path = run_counterfactual(exp.id, args.name, args.results, args.camera,
+                              engine="serial" if args.serial else "dask",
+                              workers=args.workers)
+    print(f"wrote {path} (under {COUNTERFACTUALS_DIR}/; the sweep's cause_shares.csv has its "
+          "rate beside the cause)")
     return 0
 
 

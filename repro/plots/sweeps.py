@@ -92,4 +92,49 @@ def sweep_figures(results_dir: Path, figures_dir: Path) -> list[Path]:
                          y=1.0 + 0.3 / fig.get_size_inches()[1])  # above the clause titles
             written += save_figure(fig, Path(figures_dir), paper, f"sweep_{exp}_claim{cid}")
             plt.close(fig)
+        written += _cause_figure(csv.parent, Path(figures_dir), paper, exp)
     return written
+
+
+#: one colour per cause class (issue 37), unknown in grey
+CLASS_COLOURS = {"method": "C0", "ours-defect": "C3", "ours-range": "C1", "check": "C2",
+                 "unknown": "0.6"}
+
+
+def _cause_figure(sweep_dir: Path, figures_dir: Path, paper: str, exp: str) -> list[Path]:
+    """Issue 37: per clause under the rate bar (cause_shares.csv), its failing variants as
+    one bar split by named cause, coloured by class; ``figures/<paper>/sweep_<exp>_causes``."""
+    path = sweep_dir / "cause_shares.csv"
+    if not path.is_file():
+        return []
+    df = pd.read_csv(path, dtype={"claim": str}, keep_default_na=False)
+    if df.empty:
+        return []
+    keys = list(dict.fromkeys(zip(df["claim"], df["clause"], strict=True)))
+    fig, ax = plt.subplots(figsize=(9.0, 0.45 * len(keys) + 1.4))
+    for y, (cid, clause) in enumerate(keys):
+        mine = df[(df["claim"] == cid) & (df["clause"] == clause)]
+        left = 0
+        for r in mine.to_dict("records"):
+            n = int(r["n"])
+            ax.barh(y, n, left=left, color=CLASS_COLOURS.get(str(r["class"]), "0.3"),
+                    edgecolor="white", lw=0.5)
+            cf = (f" cf {float(r['cf_rate']):.2f}" if str(r["cf_rate"]) not in ("", "nan")
+                  else "")
+            ax.text(left + n / 2, y, f"{r['cause']}{cf}", ha="center", va="center", fontsize=5,
+                    color="white" if str(r["class"]) != "unknown" else "black")
+            left += n
+        rate = mine["rate"].iloc[0]
+        scope = mine["scope"].iloc[0]
+        tag = "canonical only" if scope != "variants" else f"rate {float(rate):.2f}"
+        ax.text(left, y, f"  {tag}", va="center", fontsize=6)
+    ax.set_yticks(range(len(keys)), [f"claim {c}: {n[:60]}" for c, n in keys], fontsize=6)
+    ax.invert_yaxis()
+    ax.set_xlabel("failing variants", fontsize=7)
+    handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in CLASS_COLOURS.values()]
+    ax.legend(handles, list(CLASS_COLOURS), fontsize=6, loc="lower right", frameon=False)
+    ax.set_title(f"{paper} {exp}: why each clause fails over the sweep's variants (cf: the "
+                 "counterfactual's rate, the cause removed)", fontsize=8, loc="left")
+    out = save_figure(fig, figures_dir, paper, f"sweep_{exp}_causes")
+    plt.close(fig)
+    return out

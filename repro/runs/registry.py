@@ -101,6 +101,9 @@ class Paper:
     #: claims the paper makes together, whose joint rate a sweep reports (e.g. thomas2024
     #: 1, 2, 3: case 1 converges, its ablation collides, in that order of events)
     joint_claims: tuple[tuple[str, ...], ...] = ()
+    #: ``causes()`` -> a :class:`repro.runs.causes.CauseModel`: why each clause fails over
+    #: the sweeps' scenes (issue 37), or None
+    causes: Callable[[], Any] | None = None
 
 
 # --------------------------------------------------------------------------- discovery

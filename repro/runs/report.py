@@ -23,6 +23,7 @@ import pandas as pd
 
 from repro.errors import ReproError
 from repro.runs.claims import STATUSES, natural_key, read_claims_csv
+from repro.runs.report_causes import causes_section
 from repro.runs.trace import TRACKED_PACKAGES, effective_manifest
 from repro.runs.validate import DamagedRun, check_run
 
@@ -666,6 +667,8 @@ def render_report(
         )
         lines += _ranges_section((ranges or {}).get(paper))
         lines += _robustness_section(results_dir, paper, base)
+        lines += causes_section(results_dir, figures_dir, paper, lambda p: _link(p, base),
+                                markdown_table)
         note = (notes or {}).get(paper)
         if note is not None and Path(note).is_file():
             lines += ["### Discussion", "", Path(note).read_text(encoding="utf-8").strip(), ""]

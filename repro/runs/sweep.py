@@ -32,14 +32,23 @@ import pandas as pd
 
 from repro.errors import ConfigError, ReproError
 from repro.runs import registry
+from repro.runs.causes import (
+    COUNTERFACTUALS_DIR,
+    CauseModel,
+    compute_evidence,
+    counterfactual_variants,
+    needs_evidence,
+    scene_specific,
+    write_causes,
+)
 from repro.runs.claims import Claim, ClaimResult, extent_note
 from repro.runs.registry import Experiment, Paper, run_folder_lock
 from repro.runs.sweep_rates import REFUSED
 from repro.runs.trace import load_run
 from repro.sweep_ranges import declared_ranges, sample_variants
 
-__all__ = ["SWEEPS_DIR", "VERDICTS_FILE", "run_sweep", "run_variant", "sweep_claims",
-           "variant_config"]
+__all__ = ["SWEEPS_DIR", "VERDICTS_FILE", "cause_model", "run_counterfactual", "run_sweep",
+           "run_variant", "sweep_claims", "variant_config"]
 
 VERDICTS_FILE = "verdicts.json"
 CAMERAS = ("exact", "render")
@@ -109,10 +118,20 @@ def variant_config(exp: Experiment, overrides: Mapping[str, Any], camera: str | 
     return config
 
 
-def _judge(claims: Sequence[Claim], run_dirs: Mapping[str, Path]) -> dict[str, Any]:
-    """Every claim on the variant's runs (``{experiment name: run folder}``): status and
+def cause_model(paper: Paper) -> CauseModel | None:
+    """The paper's :class:`~repro.runs.causes.CauseModel` (issue 37), None if it has none."""
+    if paper.causes is None:
+        return None
+    model = paper.causes()
+    if not isinstance(model, CauseModel):
+        raise ReproError(f"{paper.key}: causes() returned {type(model).__name__}, not a "
+                         "CauseModel")
+    return model
+
+
+def _judge(claims: Sequence[Claim], runs: Mapping[str, Any]) -> dict[str, Any]:
+    """Every claim on the variant's runs (``{experiment name: RunFiles}``): status and
     clause figures (a check that raises is recorded as ``not_run`` with its error)."""
-    runs = {name: load_run(d) for name, d in run_dirs.items()}
     out: dict[str, Any] = {}
     for claim in claims:
         mine = _claim_runs(claim, runs)
@@ -173,6 +192,7 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
     experiment and each partner (:func:`sweep_members`) with the same ``overrides``."""
     exp, paper = _experiment(exp_id, papers)
     members = sweep_members(exp, paper)
+    model = cause_model(paper)
     configs = {}
     for m in members:  # checked below: a variant the experiment refuses is a row
         config = variant_config(m, overrides, camera, check=False)
@@ -182,12 +202,16 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
     verdicts_path = run_dir / VERDICTS_FILE
     if verdicts_path.is_file():
         done = json.loads(verdicts_path.read_text(encoding="utf-8"))
-        if done.get("config_hash") == chash:
+        # a variant judged before its paper's evidence (issue 37) is rerun where a failing
+        # clause needs it; every other judged variant is read back
+        if done.get("config_hash") == chash and not needs_evidence(
+                model, exp.name, done.get("verdicts") or {}, done.get("evidence_version")):
             return {**done["row"], "variant": index}
     tic = time.perf_counter()
     run_dir.parent.mkdir(parents=True, exist_ok=True)
     dirs = {m.name: _member_dir(run_dir, exp.name, m.name) for m in members}
     status, reason, verdicts = "completed", "", {}
+    evidence: dict[str, Any] = {}
     try:
         for m in members:
             registry.check_config(m, configs[m.name])
@@ -201,7 +225,9 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
                 status = str(manifest.get("status"))
                 reason = (f"{m.name}: " if m is not exp else "") + str(manifest.get("reason", ""))
         if status != REFUSED:
-            verdicts = _judge(sweep_claims(exp, paper), dirs)
+            runs = {name: load_run(d) for name, d in dirs.items()}
+            verdicts = _judge(sweep_claims(exp, paper), runs)
+            evidence = compute_evidence(model, exp.name, runs)  # while the traces are here
     except Exception as exc:  # a crashed variant is a row, not a lost sweep (^C still stops)
         status, reason, verdicts = "failed", f"{type(exc).__name__}: {exc}", {}
     row: dict[str, Any] = {"variant": index, "config_hash": chash[:12], "run_status": status,
@@ -217,7 +243,8 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
     verdicts_path.write_text(json.dumps({"config_hash": chash, "row": row,
                                          "members": {n: str(d.relative_to(run_dir))
                                                      for n, d in dirs.items()},
-                                         "verdicts": verdicts}, indent=1, default=_json),
+                                         "verdicts": verdicts, **evidence}, indent=1,
+                                        default=_json),
                              encoding="utf-8")
     if not keep_traces:
         _prune(run_dir, keep=[n for n in dirs if n != exp.name])
@@ -257,7 +284,8 @@ def _columns(exp: Experiment, paper: Paper) -> dict[str, dict[str, str]]:
     return cols
 
 
-def _map_dask(exp_id: str, variants: Sequence[Mapping[str, Any]], camera: str | None,
+def _map_dask(exp_id: str, variants: Sequence[tuple[int, Mapping[str, Any]]],
+              camera: str | None,
               sweep_dir: Path, keep_traces: bool, papers: Mapping[str, Paper] | None,
               scheduler: str | None, workers: int | None,
               on_done: Callable[[dict[str, Any]], None] | None) -> list[dict[str, Any]]:
@@ -274,15 +302,17 @@ def _map_dask(exp_id: str, variants: Sequence[Mapping[str, Any]], camera: str | 
     client = Client(cluster if cluster is not None else scheduler)
     try:
         futures = {client.submit(run_variant, exp_id, i, dict(ov), camera, Path(sweep_dir),
-                                 keep_traces, papers, key=f"variant-{i}-{exp_id}",
-                                 pure=False, retries=1): i for i, ov in enumerate(variants)}
+                                 keep_traces, papers,
+                                 key=f"variant-{i}-{exp_id}-{Path(sweep_dir).name}",
+                                 pure=False, retries=1): k
+                   for k, (i, ov) in enumerate(variants)}
         rows: dict[int, dict[str, Any]] = {}
         for fut in as_completed(futures):
             row = fut.result()
             rows[futures[fut]] = row
             if on_done is not None:
                 on_done(row)
-        return [rows[i] for i in range(len(variants))]
+        return [rows[k] for k in range(len(variants))]
     finally:
         client.close()
         if cluster is not None:
@@ -325,34 +355,91 @@ def _sweep_lock(sweep_dir: Path) -> Iterator[None]:
                          "(a sweep resumes: rerun it afterwards to add variants)") from None
 
 
+def _map_variants(exp: Experiment, variants: Sequence[tuple[int, Mapping[str, Any]]],
+                  camera: str | None, sweep_dir: Path, keep_traces: bool,
+                  papers: Mapping[str, Paper] | None,
+                  on_done: Callable[[dict[str, Any]], None] | None, engine: str,
+                  scheduler: str | None, workers: int | None) -> list[dict[str, Any]]:
+    """The rows of ``variants`` (``(index, overrides)``) run by ``engine``, in their order."""
+    if engine == "dask":
+        return _map_dask(exp.id, variants, camera, sweep_dir, keep_traces, papers, scheduler,
+                         workers, on_done)
+    rows = []
+    for i, overrides in variants:
+        row = run_variant(exp.id, i, overrides, camera, sweep_dir, keep_traces, papers)
+        rows.append(row)
+        if on_done is not None:
+            on_done(row)
+    return rows
+
+
+def _write_variants(sweep_dir: Path, rows: Sequence[Mapping[str, Any]],
+                    meta: Mapping[str, Any]) -> Path:
+    """variants.csv (atomically) and variants.columns.json of a sweep folder."""
+    path = sweep_dir / "variants.csv"
+    tmp = path.with_name(path.name + ".tmp")
+    pd.DataFrame(list(rows)).to_csv(tmp, index=False, float_format="%.10g")
+    tmp.replace(path)
+    (sweep_dir / "variants.columns.json").write_text(json.dumps(meta, indent=1) + "\n",
+                                                     encoding="utf-8")
+    return path
+
+
 def _run_locked(exp: Experiment, paper: Paper, variants: list[dict[str, Any]], n: int,
                 seed: int, sweep_dir: Path, results_dir: Path, camera: str | None,
                 keep_traces: bool, papers: Mapping[str, Paper] | None,
                 on_done: Callable[[dict[str, Any]], None] | None, engine: str,
                 scheduler: str | None, workers: int | None) -> Path:
-    if engine == "dask":
-        rows = _map_dask(exp.id, variants, camera, sweep_dir, keep_traces, papers, scheduler,
-                         workers, on_done)
-    else:
-        rows = []
-        for i, overrides in enumerate(variants):
-            row = run_variant(exp.id, i, overrides, camera, sweep_dir, keep_traces, papers)
-            rows.append(row)
-            if on_done is not None:
-                on_done(row)
-    table = pd.DataFrame(rows)
-    path = sweep_dir / "variants.csv"
-    tmp = path.with_name(path.name + ".tmp")
-    table.to_csv(tmp, index=False, float_format="%.10g")
-    tmp.replace(path)
-    (sweep_dir / "variants.columns.json").write_text(
-        json.dumps({"experiment": exp.id, "n": n, "seed": seed, "camera": camera,
-                    "members": [m.id for m in sweep_members(exp, paper)],
-                    "engine": engine,
-                    "workers": (1 if engine == "serial" else
-                                workers or (None if scheduler else os.cpu_count())),
-                    "columns": _columns(exp, paper)}, indent=1) + "\n", encoding="utf-8")
+    rows = _map_variants(exp, list(enumerate(variants)), camera, sweep_dir, keep_traces,
+                         papers, on_done, engine, scheduler, workers)
+    path = _write_variants(sweep_dir, rows, {
+        "experiment": exp.id, "n": n, "seed": seed, "camera": camera,
+        "members": [m.id for m in sweep_members(exp, paper)], "engine": engine,
+        "workers": (1 if engine == "serial" else
+                    workers or (None if scheduler else os.cpu_count())),
+        "columns": _columns(exp, paper)})
     _write_tables(sweep_dir, results_dir, exp, paper)
+    return path
+
+
+def run_counterfactual(exp_id: str, name: str, results_dir: Path, camera: str | None = "exact",
+                       papers: Mapping[str, Paper] | None = None,
+                       on_done: Callable[[dict[str, Any]], None] | None = None,
+                       engine: str = "serial", scheduler: str | None = None,
+                       workers: int | None = None) -> Path:
+    """Rerun the variants of ``exp_id``'s sweep that failed by the cause counterfactual
+    ``name`` removes (issue 37, item 3), each with the same parameters and the
+    counterfactual's overrides, into ``<sweep>/counterfactuals/<name>/``; then rewrite the
+    sweep's cause tables (the counterfactual's rate beside the cause). Return the
+    counterfactual's variants.csv."""
+    if engine not in ENGINES:
+        raise ConfigError(f"sweep engine {engine!r}: choose one of {ENGINES}")
+    exp, paper = _experiment(exp_id, papers)
+    model = cause_model(paper)
+    if model is None:
+        raise ConfigError(f"{exp.paper} declares no causes, hence no counterfactual")
+    cf = model.counterfactual(exp.name, name)
+    base = sweep_folder(Path(results_dir), exp, camera)
+    meta_path = base / "variants.columns.json"
+    if not meta_path.is_file():
+        raise ConfigError(f"{exp.id} has no {camera} sweep under {base}: run `repro sweep` "
+                          "first")
+    meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    sampled = sample_variants(exp.config_cls, int(meta["n"]), int(meta["seed"]))
+    chosen = [(int(r["variant"]), {**sampled[int(r["variant"])], **cf.overrides})
+              for r in counterfactual_variants(base, cf)]
+    cf_dir = base / COUNTERFACTUALS_DIR / cf.name
+    with _sweep_lock(base):
+        rows = _map_variants(exp, chosen, camera, cf_dir, False, papers, on_done, engine,
+                             scheduler, workers)
+        cf_dir.mkdir(parents=True, exist_ok=True)
+        path = _write_variants(cf_dir, rows, {
+            "experiment": exp.id, "counterfactual": cf.name, "removes": cf.removes,
+            "overrides": dict(cf.overrides), "why": cf.why, "source_n": meta["n"],
+            "source_seed": meta["seed"], "camera": camera, "engine": engine,
+            "columns": {"variant": {"unit": "-", "definition": "the source variant's index "
+                                    "in the sweep this reruns"}, **_columns(exp, paper)}})
+        _write_tables(base, Path(results_dir), exp, paper)
     return path
 
 
@@ -372,8 +459,11 @@ def _write_tables(sweep_dir: Path, results_dir: Path, exp: Experiment, paper: Pa
     from repro.runs.sweep_rates import write_agreement, write_rates
     from repro.runs.sweep_sensitivity import write_sensitivity
 
-    out = [write_rates(sweep_dir, results_dir, exp.paper, exp.name, paper.joint_claims),
+    model = cause_model(paper)
+    out = [write_rates(sweep_dir, results_dir, exp.paper, exp.name, paper.joint_claims,
+                       scene_specific(model, exp.name)),
            write_sensitivity(sweep_dir, exp.name)]
+    out += write_causes(sweep_dir, model, exp.name)
     exact = sweep_dir.parent if sweep_dir.name == RENDER_DIR else sweep_dir
     if (exact / RENDER_DIR / "variants.csv").is_file() and (exact / "variants.csv").is_file():
         out.append(write_agreement(exact, exact / RENDER_DIR, exp.name))

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import pandas as pd
@@ -23,7 +23,11 @@ __all__ = ["AGREEMENT_COLUMNS", "RATES_COLUMNS", "wilson_interval", "write_agree
            "write_rates"]
 
 RATES_COLUMNS = ("experiment", "claim", "clause", "variants", "held", "rate", "wilson_low",
-                 "wilson_high", "failed_runs", "canonical", "refused")
+                 "wilson_high", "failed_runs", "canonical", "refused", "scope")
+#: ``scope`` of a row: a rate over the variants, or a clause (a claim, a joint row holding
+#: one) that fits only the paper's own scene, judged on the canonical run alone: its rate is
+#: not reported (issue 37; :attr:`repro.runs.causes.Diagnosis.scene_specific`)
+SCOPE_VARIANTS, SCOPE_CANONICAL = "variants", "canonical only"
 #: run_status of a variant its experiment refuses before running (ConfigError: e.g. a board
 #: through the robot's start pose); such a variant is no scene of the paper's, not a failure
 REFUSED = "refused"
@@ -73,11 +77,15 @@ def _canonical(results_dir: Path, paper: str) -> tuple[dict[str, str], dict[tupl
 
 
 def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str,
-                joint: Sequence[Sequence[str]] = ()) -> Path:
+                joint: Sequence[Sequence[str]] = (),
+                specific: Mapping[tuple[str, str], str] | None = None) -> Path:
     """Write ``sweep_dir / rates.csv`` from ``sweep_dir / variants.csv``; return its path.
 
     ``joint``: sets of claims the paper makes together; each set whose claims were all
-    judged gets a row ``claim = "1+2+3"``: the variants in which every one is reproduced."""
+    judged gets a row ``claim = "1+2+3"``: the variants in which every one is reproduced.
+    ``specific``: ``{(claim, clause): why}`` of the clauses that fit only the paper's own
+    scene: their rows (and their claim's, and a joint row holding it) keep their counts but
+    no rate (``scope`` "canonical only")."""
     sweep_dir, results_dir = Path(sweep_dir), Path(results_dir)
     df = pd.read_csv(sweep_dir / "variants.csv")
     judged = df[~df["run_status"].isin(NOT_JUDGED)]
@@ -118,9 +126,19 @@ def write_rates(sweep_dir: Path, results_dir: Path, paper: str, experiment: str,
                      k / n if n else math.nan, lo, hi, failed,
                      "reproduced" if all(c == "reproduced" for c in canon)
                      else ("" if not all(canon) else "not jointly"), refused))
+    specific = dict(specific or {})
+    bare = {cid for cid, _ in specific}
+    scoped = []
+    for r in rows:
+        cid, clause = r[1], r[2]
+        local = ((cid, clause) in specific or (not clause and cid in bare)
+                 or ("+" in cid and bool(set(cid.split("+")) & bare)))
+        if local:  # counts kept, no rate: the clause fits only the paper's scene
+            r = (*r[:5], math.nan, math.nan, math.nan, *r[8:])
+        scoped.append((*r, SCOPE_CANONICAL if local else SCOPE_VARIANTS))
     out = sweep_dir / "rates.csv"
-    pd.DataFrame(rows, columns=list(RATES_COLUMNS)).to_csv(out, index=False,
-                                                           float_format="%.6g")
+    pd.DataFrame(scoped, columns=list(RATES_COLUMNS)).to_csv(out, index=False,
+                                                             float_format="%.6g")
     return out
 
 
