@@ -168,6 +168,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="no Dask: the variants one after another in this process")
     p.set_defaults(func=_cmd_counterfactual)
 
+    p = sub.add_parser("cause-videos", help="one MP4 per named cause of a sweep: its example "
+                       "variant rerun and replayed (<figures>/<paper>/videos/causes/)")
+    _add_global_options(p, top_level=False)
+    p.add_argument("experiment", help="experiment id of a committed sweep, e.g. "
+                   "thomas2024.case1")
+    p.add_argument("--camera", choices=("exact", "render"), default="exact",
+                   help="the sweep whose causes to show (default: the exact-camera one)")
+    p.set_defaults(func=_cmd_cause_videos)
+
     p = sub.add_parser("figures", help="draw figures and evaluate claims from the traces")
     _add_global_options(p, top_level=False)
     p.add_argument("--paper", metavar="P", default=None, help="only this paper")
@@ -746,6 +755,18 @@ def _cmd_counterfactual(args: argparse.Namespace) -> int:
                               workers=args.workers)
     print(f"wrote {path} (under {COUNTERFACTUALS_DIR}/; the sweep's cause_shares.csv has its "
           "rate beside the cause)")
+    return 0
+
+
+def _cmd_cause_videos(args: argparse.Namespace) -> int:
+    """Issue 37: ``repro cause-videos EXP``."""
+    from repro.runs.sweep import cause_videos
+
+    exp = registry.find_experiment(registry.load_papers(), args.experiment)
+    check_dir_arg(args.results, "--results", must_exist=True)
+    check_dir_arg(args.figures, "--figures")
+    for path in cause_videos(exp.id, args.results, args.figures, args.camera):
+        print(f"wrote {path}")
     return 0
 
 

@@ -247,3 +247,38 @@ def test_the_cli_refuses_an_unknown_counterfactual_before_anything_runs(
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_cause_videos_rerun_each_example_and_refuse_a_moved_verdict(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """One video per named cause (not per scene-specific clause), from the example variant
+    rerun with its trace; a rerun whose verdicts differ from the sweep's is refused."""
+    from repro.replay import video
+    from repro.runs.sweep import cause_videos
+
+    made: list[tuple[Path, Path]] = []
+
+    def fake_video(run_dir: Path, out: Path, **_: object) -> Path:
+        assert (run_dir / "trace.csv").is_file()  # the rerun kept its trace
+        out.write_bytes(b"mp4")
+        made.append((run_dir, out))
+        return out
+
+    monkeypatch.setattr(video, "write_video", fake_video)
+    runner = Runner()
+    papers = _papers(runner)
+    run_sweep("fake.case", 16, seed=1, results_dir=tmp_path, papers=papers)
+    figs = tmp_path / "figures"
+    out = cause_videos("fake.case", tmp_path, figs, papers=papers)
+    assert sorted(p.name for p in out) == ["case__drive-saturation.mp4", "case__no-classifier.mp4",
+                                           "case__offset.mp4"]
+    assert all(p.parent == figs / "fake" / "videos" / "causes" for p in out)
+    # the sweep's record says otherwise (as if the code had changed since): refused
+    shares = pd.read_csv(tmp_path / "sweeps" / "case" / "cause_shares.csv", dtype=str)
+    h = shares.loc[shares["cause"] == "offset", "example_hash"].iloc[0]
+    path = tmp_path / "sweeps" / "case" / "variants" / h / VERDICTS_FILE
+    doc = json.loads(path.read_text())
+    doc["row"]["claim1.c2.holds"] = True
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ReproError, match="differ from the sweep's"):
+        cause_videos("fake.case", tmp_path, figs, papers=papers)

@@ -47,8 +47,8 @@ from repro.runs.sweep_rates import REFUSED
 from repro.runs.trace import load_run
 from repro.sweep_ranges import declared_ranges, sample_variants
 
-__all__ = ["SWEEPS_DIR", "VERDICTS_FILE", "cause_model", "run_counterfactual", "run_sweep",
-           "run_variant", "sweep_claims", "variant_config"]
+__all__ = ["SWEEPS_DIR", "VERDICTS_FILE", "cause_model", "cause_videos", "run_counterfactual",
+           "run_sweep", "run_variant", "sweep_claims", "variant_config"]
 
 VERDICTS_FILE = "verdicts.json"
 CAMERAS = ("exact", "render")
@@ -441,6 +441,54 @@ def run_counterfactual(exp_id: str, name: str, results_dir: Path, camera: str | 
                                     "in the sweep this reruns"}, **_columns(exp, paper)}})
         _write_tables(base, Path(results_dir), exp, paper)
     return path
+
+
+def cause_videos(exp_id: str, results_dir: Path, figures_dir: Path,
+                 camera: str | None = "exact", papers: Mapping[str, Paper] | None = None,
+                 size: tuple[int, int] = (640, 320)) -> list[Path]:
+    """Issue 37: one video per named cause of a sweep (cause_shares.csv): its example
+    variant rerun with its trace into a scratch folder (the same parameters, drawn again
+    from the sweep's seed), checked to give the verdicts the sweep recorded, and replayed
+    from those files (:mod:`repro.replay.video`) into
+    ``<figures>/<paper>/videos/causes/<exp>__<cause>.mp4``. Returns the videos written."""
+    import tempfile
+
+    from repro.replay.video import write_video
+    from repro.runs.report_causes import example_video
+
+    exp, paper = _experiment(exp_id, papers)
+    base = sweep_folder(Path(results_dir), exp, camera)
+    shares_path = base / "cause_shares.csv"
+    if not shares_path.is_file():
+        raise ConfigError(f"{exp.id} has no cause table under {base}: run its sweep first")
+    meta = json.loads((base / "variants.columns.json").read_text(encoding="utf-8"))
+    sampled = sample_variants(exp.config_cls, int(meta["n"]), int(meta["seed"]))
+    shares = pd.read_csv(shares_path, dtype={"claim": str, "example_hash": str},
+                         keep_default_na=False)
+    written: list[Path] = []
+    done: set[str] = set()
+    for r in shares.to_dict("records"):
+        cause = str(r["cause"])
+        if cause in done or r["class"] == "check":  # a scene-specific clause: no scene shows it
+            continue
+        done.add(cause)
+        index = int(r["example_variant"])
+        with tempfile.TemporaryDirectory() as tmp:
+            row = run_variant(exp.id, index, sampled[index], camera, Path(tmp), True, papers)
+            if str(row["config_hash"]) != str(r["example_hash"]):
+                raise ReproError(f"{exp.id} variant {index}: drawn again it hashes to "
+                                 f"{row['config_hash']}, the sweep's to {r['example_hash']}")
+            run_dir = Path(tmp) / "variants" / str(row["config_hash"])
+            recorded = json.loads((base / "variants" / str(r["example_hash"]) / VERDICTS_FILE
+                                   ).read_text(encoding="utf-8"))["row"]
+            moved = [k for k, v in row.items() if k.endswith(".holds") and recorded.get(k) != v]
+            if moved:
+                raise ReproError(f"{exp.id} variant {index} rerun: verdicts {moved} differ "
+                                 "from the sweep's (the code changed: rerun the sweep)")
+            out = example_video(Path(figures_dir), exp.paper, exp.name, cause)
+            out.parent.mkdir(parents=True, exist_ok=True)
+            written.append(write_video(run_dir, out, size=size))
+    return written
 
 
 #: Sub-folder of a sweep's folder holding its rendered-camera subsample (item 5)
