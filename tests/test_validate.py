@@ -142,7 +142,7 @@ def test_a_damaged_run_makes_its_claims_not_run_and_is_stale(tmp_path):
 
 
 def test_figures_skip_a_damaged_run_with_one_line(tmp_path, capsys):
-    from repro.runs.trace import load_run_if_present
+    from repro.runs.validate import load_run_if_present
 
     run = _copy(tmp_path)
     assert load_run_if_present(run.parent, run.name) is not None
@@ -153,7 +153,7 @@ def test_figures_skip_a_damaged_run_with_one_line(tmp_path, capsys):
 
 
 def test_figures_skip_an_interrupted_run(tmp_path, capsys):
-    from repro.runs.trace import load_run_if_present
+    from repro.runs.validate import load_run_if_present
 
     run = _copy(tmp_path)
     FAULTS["interrupted"][0](run)

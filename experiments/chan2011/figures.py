@@ -13,7 +13,8 @@ import numpy as np  # noqa: E402
 
 from experiments.chan2011.columns import scene_limits, target_points_world  # noqa: E402
 from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
-from repro.runs.trace import RunFiles, load_run, load_run_if_present  # noqa: E402
+from repro.runs.trace import RunFiles, load_run  # noqa: E402
+from repro.runs.validate import load_run_if_present  # noqa: E402
 
 PAPER = "chan2011"
 from experiments.chan2011.columns import N_POINTS as N  # noqa: E402

@@ -18,7 +18,8 @@ from experiments.pomares2011.columns import N_POINTS  # noqa: E402
 from experiments.pomares2011.exp3_figures import make_exp3_figures  # noqa: E402
 from experiments.pomares2011.task_figures import make_task_figures  # noqa: E402
 from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
-from repro.runs.trace import RunFiles, load_run_if_present  # noqa: E402
+from repro.runs.trace import RunFiles  # noqa: E402
+from repro.runs.validate import load_run_if_present  # noqa: E402
 
 PAPER = "pomares2011"
 #: s* reached: the RMS distance of the points to s* under this [px] (the mark of Fig. 6).

@@ -18,7 +18,8 @@ from experiments.pomares2011.exp3_figures import (  # noqa: E402
     snapshot_montage,
 )
 from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
-from repro.runs.trace import RunFiles, load_run_if_present  # noqa: E402
+from repro.runs.trace import RunFiles  # noqa: E402
+from repro.runs.validate import load_run_if_present  # noqa: E402
 
 PAPER = "pomares2011"
 #: Shading of the hand's phases (the approach stays white).

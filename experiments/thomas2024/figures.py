@@ -18,7 +18,8 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from repro.plots.style import PALETTE, apply_style, save_figure  # noqa: E402
-from repro.runs.trace import RunFiles, load_run_if_present  # noqa: E402
+from repro.runs.trace import RunFiles  # noqa: E402
+from repro.runs.validate import load_run_if_present  # noqa: E402
 
 PAPER = "thomas2024"
 from experiments.thomas2024.columns import N_SENSORS  # noqa: E402

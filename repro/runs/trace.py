@@ -64,7 +64,6 @@ __all__ = [
     "count_trace_rows",
     "effective_manifest",
     "load_run",
-    "load_run_if_present",
     "recover_manifest_tmp",
     "mark_if_gone",
     "package_versions",
@@ -798,23 +797,6 @@ def add_vector(row: dict[str, Any], name: str, values: Any) -> None:
     number joints and sensors)."""
     for i, v in enumerate(values):
         row[f"{name}{i + 1}"] = v
-
-
-def load_run_if_present(base: Path, name: str) -> RunFiles | None:
-    """The run ``base / name`` validated (:func:`repro.runs.validate.check_run`) if it
-    has a manifest, else None: figures draw what exists and is whole. A damaged or
-    unfinished run is skipped with one line on stderr naming its folder and the rule it
-    fails."""
-    from repro.runs.validate import DamagedRun, check_run
-
-    path = Path(base) / name
-    if not (path / "manifest.json").exists():
-        return None
-    try:
-        return check_run(path)
-    except DamagedRun as exc:
-        print(f"figures: skipping {exc}", file=sys.stderr)
-        return None
 
 
 # --------------------------------------------------------------------------- dead runs

@@ -27,6 +27,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +44,7 @@ from repro.runs.trace import (
     load_run,
 )
 
-__all__ = ["DamagedRun", "VALID_FILES", "check_run"]
+__all__ = ["DamagedRun", "VALID_FILES", "check_run", "load_run_if_present"]
 
 #: The files every run folder must hold.
 VALID_FILES = (*RUN_FILES, COLUMNS_FILE)
@@ -206,3 +207,18 @@ def check_run(run_dir: Path) -> RunFiles:
     _check_types(run_dir, run.trace, units)
     _check_time(run_dir, run.trace)
     return run
+
+
+def load_run_if_present(base: Path, name: str) -> RunFiles | None:
+    """The run ``base / name`` validated (:func:`check_run`) if it
+    has a manifest, else None: figures draw what exists and is whole. A damaged or
+    unfinished run is skipped with one line on stderr naming its folder and the rule it
+    fails."""
+    path = Path(base) / name
+    if not (path / "manifest.json").exists():
+        return None
+    try:
+        return check_run(path)
+    except DamagedRun as exc:
+        print(f"figures: skipping {exc}", file=sys.stderr)
+        return None

@@ -51,14 +51,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from repro.errors import ConfigError
+from repro.sensors.intrinsics import Intrinsics, PixelWindow
 
-if TYPE_CHECKING:
-    from repro.sensors.camera import Intrinsics
+__all__ = ["FULL_FRAME_REASONS", "RASTER_PX", "DotBlobs", "FrameReport", "PixelWindow",
+           "WindowPlan", "WindowPolicy", "WindowTracker", "image_motion_bound_px"]
 
 #: Why a frame was rendered in full: no frame before (``"first"``), a dot not found in the
 #: last frame (``"lost"``), the ``full_every`` period (``"period"``), a dot not found in
@@ -144,34 +145,6 @@ class WindowPolicy:
         :data:`RASTER_PX` (arguments as there; units [s], [rad/s], [m/s], [m])."""
         bound = image_motion_bound_px(intr, frame_dt, omega_max, v_max, z_min)
         return cls(int(math.ceil(bound)) + RASTER_PX, full_every, edge_px)
-
-
-class PixelWindow(NamedTuple):
-    """A rectangle of image pixels: columns ``[x0, x1)``, rows ``[y0, y1)`` (full-image
-    indices, so pixel ``rgb[r, c]`` of the window is ``(u, v) = (x0 + c, y0 + r)`` [px])."""
-
-    x0: int
-    y0: int
-    x1: int
-    y1: int
-
-    @property
-    def width(self) -> int:
-        return self.x1 - self.x0
-
-    @property
-    def height(self) -> int:
-        return self.y1 - self.y0
-
-    @property
-    def area(self) -> int:
-        """Number of pixels."""
-        return self.width * self.height
-
-    def union(self, other: PixelWindow) -> PixelWindow:
-        """The smallest window holding both."""
-        return PixelWindow(min(self.x0, other.x0), min(self.y0, other.y0),
-                           max(self.x1, other.x1), max(self.y1, other.y1))
 
 
 class WindowPlan(NamedTuple):
