@@ -414,3 +414,42 @@ def test_the_variation_file_reaches_the_tables(results: Path, tmp_path: Path) ->
     pd.DataFrame([{"paper": "p2020"}]).to_csv(results / VARIATION_FILE, index=False)
     with pytest.raises(ReproError, match="missing"):
         read_variation(results)
+
+
+def test_a_size_bound_cannot_hide_from_the_marginal_flag() -> None:
+    """Issue 38: relative=False silenced the flag on a size bound (chan2011 1: 0.4963 vs
+    0.5 px, a 0.7 % margin); it is refused there and kept for counts, flags and tolerances
+    around zero."""
+    from repro.runs.claims import Clause
+
+    with pytest.raises(ConfigError, match="relative"):
+        Clause("final error", 0.4963, "<", 0.5, "px", "ours: the stop test", relative=False)
+    sized = Clause("final error", 0.4963, "<", 0.5, "px", "ours: the stop test")
+    assert sized.holds and sized.marginal and "MARGINAL" in sized.summary()
+    for ok in (Clause("no contact", 0.002, ">", 0.0, "m", "paper: x", relative=False),
+               Clause("tolerance", 0.0, "<=", 1e-6, "rad", "ours: x", relative=False),
+               Clause("two sensors", 6, ">=", 2, "-", "paper: x", relative=False)):
+        assert ok.holds and not ok.marginal
+
+
+def test_a_renamed_clause_does_not_silently_lose_its_variation(results: Path) -> None:
+    """Issue 38: the variation file is joined by the clause's words; a clause renamed since
+    it was measured is named in the claim's measured text, not dropped in silence."""
+    from repro.runs.claims import VARIATION_COLUMNS, VARIATION_FILE, Clause
+
+    def check(runs: dict[str, RunFiles]) -> ClaimResult:
+        worst = float(runs["good"].trace["err_m"].max()) * 1e3
+        return ClaimResult.from_clauses("m", [
+            Clause("error under 5 mm (renamed)", worst, "<", 5.0, "mm", "paper: x"),
+            Clause("error under 8 mm", worst, "<", 8.0, "mm", "ours: x")])
+
+    claim = Claim("p2020", "1", "claim 1", "< 5 mm", ("good",), check)
+    row = dict.fromkeys(VARIATION_COLUMNS, "")
+    pd.DataFrame([{**row, "paper": "p2020", "claim": "1", "clause": name, "committed": 4.0,
+                   "min": 3.9, "max": 4.1}
+                  for name in ("error under 5 mm", "error under 8 mm")]).to_csv(
+        results / VARIATION_FILE, index=False)
+    measured = evaluate_claims([claim], results, _papers()).iloc[0]["measured"]
+    assert "VARIATION" in measured and "'error under 5 mm'" in measured
+    assert "'error under 5 mm (renamed)'" in measured  # the clause left without a variation
+    assert "'error under 8 mm'" not in measured.split("without a measured variation")[1]

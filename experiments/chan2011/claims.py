@@ -135,8 +135,9 @@ def check_1(runs: dict[str, RunFiles]) -> ClaimResult:
         [Clause("the camera reaches the desired position (final RMS pixel error; the run "
                 f"stops once under {stop_px:g} px for 0.2 s)", e[-1], "<", stop_px, "px",
                 "ours: the run's own convergence test, stop_px (a 1024 x 768 image); issue "
-                "18: was 'under 5 % of its start' on a 20 s run",
-                relative=False),  # the stop test ends the run just under its bound by design
+                "18: was 'under 5 % of its start' on a 20 s run"),
+         # the stop test ends the run just under its bound by design: its margin is small
+         # and the clause is marginal, which the table must say (issue 38)
          Clause("significant translation towards the target", d0 - d1, ">=", MIN_APPROACH_M,
                 "m", "ours: 'significant' (Sec. III-B) has no figure; 10x the pose error"),
          Clause("in-plane rotation", abs(twist), ">=", MIN_IN_PLANE_DEG, "deg",

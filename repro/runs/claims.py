@@ -37,6 +37,7 @@ from repro.runs.validate import DamagedRun, check_run
 __all__ = [
     "CLAIMS_COLUMNS",
     "CLAUSE_COLUMNS",
+    "ABSOLUTE_MAX",
     "MARGINAL_FRACTION",
     "VARIATION_COLUMNS",
     "VARIATION_FILE",
@@ -70,6 +71,9 @@ VARIATION_COLUMNS = ("paper", "claim", "clause", "committed", "min", "max", "n_p
 #: A clause whose measured figure is within this fraction of its threshold is ``marginal``
 #: (issue 18: within 10 %).
 MARGINAL_FRACTION = 0.10
+#: The largest threshold a ``relative=False`` clause with a unit may have: a numerical
+#: tolerance around zero (e.g. 1e-6 rad), not a size bound
+ABSOLUTE_MAX = 1e-3  # ours: above the checks' tolerances (<= 1e-6), below their sizes (>= 0.01)
 _OPS = {"<=": lambda a, b: a <= b, ">=": lambda a, b: a >= b, "<": lambda a, b: a < b,
         ">": lambda a, b: a > b}
 
@@ -113,6 +117,13 @@ class Clause:
                               f"'ours:', got {self.source!r}")
         object.__setattr__(self, "measured", float(self.measured))
         object.__setattr__(self, "threshold", float(self.threshold))
+        if (not self.relative and self.unit != "-" and self.threshold != 0.0
+                and abs(self.threshold) > ABSOLUTE_MAX):
+            raise ConfigError(
+                f"clause {self.name!r}: a bound of {self.threshold:g} {self.unit} on a size is "
+                "relative (its relative margin and the marginal flag mean something); "
+                "relative=False is for counts, flags and tolerances around zero (issue 38: "
+                "chan2011 1's 0.4963 vs 0.5 px was never flagged)")
 
     @classmethod
     def flag(cls, name: str, ok: bool, source: str, evidence: bool = True) -> Clause:
@@ -422,6 +433,23 @@ def with_variation(claim: Claim, clauses: Sequence[Clause],
     return tuple(out)
 
 
+def stale_variation_note(claim: Claim, clauses: Sequence[Clause],
+                         variation: Mapping[tuple[str, str, str], tuple[float, float]]) -> str:
+    """A warning for the claim's ``measured`` text when the variation file names clauses of
+    this claim that its check no longer has (a renamed clause), and which of its clauses
+    then have no measured variation: the join is by the clause's words, and a renamed
+    clause must not silently lose its variation (issue 38). Empty when all match."""
+    names = {c.name for c in clauses}
+    known = {k[2] for k in variation if k[:2] == (claim.paper, claim.claim)}
+    gone = sorted(known - names)
+    if not gone:
+        return ""
+    bare = sorted(c.name for c in clauses if c.variation is None)
+    return (f" [VARIATION: {VARIATION_FILE} names clauses {gone} that this check no longer "
+            f"has; without a measured variation: {bare}; re-measure with "
+            "tests/measure_clause_variation.py]")
+
+
 def _default_hash(papers: Mapping[str, Paper], paper: str, name: str) -> str:
     """The config hash of the registered experiment ``paper.name``'s default config, or
     raise ReproError saying why there is none."""
@@ -519,12 +547,14 @@ def evaluate_claims(
             message = f"check returned {type(result).__name__}, not ClaimResult"
             rows.append(_row(claim, message, "not_run"))
             continue
+        stale = ""
         if variation and result.clauses:
             result = replace(result, clauses=with_variation(claim, result.clauses, variation))
+            stale = stale_variation_note(claim, result.clauses, variation)
         extent, cut_short = extent_note(runs, claim.whole_run, claim.done_events)
         status = ("not_reproduced" if cut_short and result.status in (
             "reproduced", "partly_reproduced") else result.status)
-        rows.append(_row(claim, result.measured + extent + audit_note(runs), status,
+        rows.append(_row(claim, result.measured + extent + audit_note(runs) + stale, status,
                          result.clauses))
         if clauses_out is not None:
             clauses_out.extend(clause_rows(claim, result.clauses))
