@@ -69,9 +69,15 @@ QUOTES = {
     "4": ('Sec. 7.2: "When the human enters within the workspace, the cost function (17) '
           'increases and the secondary task is employed to avoid the collision ... the goal of '
           'the mini-robot is to observe the y-coordinate of f_1p at position 272, i.e., f*_1py '
-          '= 272 px ... the secondary task causes a small variation in the image features ... '
-          'Once the human goes out of the robot workspace (dist > dmin), only the primary task '
-          'is employed, which considers the desired features indicated in the Experiment 1."'),
+          '= 272 px. Only one DOF is required to perform the image-based task e_1 of the '
+          'mini-robot direct hybrid controller. This DOF compensates the motion of the robotic '
+          'manipulator. The other motion components will be used to carry out the secondary '
+          'task. ... When the human operator enters in the workspace, the primary task '
+          'compensates the decrease in depth of the robotic manipulator and the secondary task '
+          'causes a small variation in the image features in order to avoid the collision '
+          '(f*_1py = 272 px). Once the human goes out of the robot workspace (dist > dmin), '
+          'only the primary task is employed, which considers the desired features indicated '
+          'in the Experiment 1."'),
 }
 
 

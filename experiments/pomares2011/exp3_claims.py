@@ -328,9 +328,9 @@ CLAIM_5 = Claim(
            'finishes when all the steps of the trajectory are executed."'))
 
 CLAIM_5B = Claim(
-    PAPER, "5b", "Beyond the paper (its argument for tactile control, Sec. 1): the same "
+    PAPER, "5b", "Beyond the paper (its argument for tactile control, Sec. 2): the same "
     "trajectory without tactile control slips or drops the object",
     f"> {SLIP_M * 1e3:g} mm off the plan or a drop", ("exp3_no_tactile",), check_5b,
-    quote=('Sec. 1: "This tactile control guarantees that the fingers apply a minimum contact '
+    quote=('Sec. 2: "This tactile control guarantees that the fingers apply a minimum contact '
            'force to the object in order to avoid grasp instability caused by the loss of" '
            'contact (the paper reports no run without it)'))

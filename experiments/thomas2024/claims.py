@@ -488,9 +488,13 @@ QUOTES = {
     "7": ('Sec. V-C: "the components of visual task function is close to zero at the '
           'beginning and becomes non-zero when the hand of the human operator is brought '
           'close to the robot. Towards the end of the experiment, the components approach '
-          'again the value of zero. ... the four instances in the interval between 5 s to '
-          '18 s when proximity sensors on ring 2 reach close to virtual contact ... from '
-          'approximately 20 s to 30 s ... four instances."'),
+          'again the value of zero. ... It can be seen in Fig. 9d the four instances in the '
+          'interval between 5 s to 18 s when proximity sensors on ring 2 reach close to '
+          'virtual contact. In the later phase from approximately 20 s to 30 s, the hand '
+          'interacts with ring 1 as seen in Fig. 9c. There are four instances when few sensors '
+          'on ring 1 reach their threshold value. The results suggest that the control '
+          'architecture works well even though obstacles were assumed to be static in the '
+          'modelling."'),
     "8": ('Sec. VI: "For Case 1, when global convergence is achieved ... we can substitute '
           'u* = 0 ... to obtain weak complementarity condition, i.e., kappa_k* = 0."'),
 }
