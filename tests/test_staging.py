@@ -357,3 +357,42 @@ def test_a_stopped_variant_leaves_no_folder_a_resumed_sweep_takes_for_judged(tmp
     assert len(names) == 4 and {*judged, partial.name} <= set(names)  # no .partial left
     assert all((variants / h / VERDICTS_FILE).is_file() for h in names)
     assert len(path.read_text().splitlines()) == 5  # header + 4 rows
+
+
+def test_a_signal_during_the_swap_is_acted_on_once_the_run_is_in(runs, tmp_path, monkeypatch,
+                                                                  capsys):
+    """SIGINT between the two renames is held until the swap is done: the new run is whole
+    in its folder, the old one gone, and the one line says so (exit 130 all the same)."""
+    results = tmp_path / "results"
+    _committed(results, "a")
+    real = staging._swap
+
+    def signalled(stage: Path, target: Path) -> None:
+        os.kill(os.getpid(), signal.SIGINT)
+        real(stage, target)
+
+    monkeypatch.setattr(staging, "_swap", signalled)
+    try:
+        assert cli.main(["--results", str(results), "run", "fake.a"]) == 130
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    err = capsys.readouterr().err
+    assert f"repro: interrupted (SIGINT) as the run closed; it is complete in " \
+        f"{results / 'fake' / 'a'}" in err
+    assert json.loads((results / "fake" / "a" / "manifest.json").read_text())["made"] == "new"
+    assert sorted(p.name for p in (results / "fake").iterdir()) == ["a"]
+
+
+def test_a_live_run_in_a_staging_folder_is_busy_not_partial(runs, tmp_path, capsys):
+    import socket
+
+    results = tmp_path / "results"
+    for name in ("a", "b", "c"):
+        _committed(results, name)
+    write_whole_run(results / "fake" / PARTIAL_DIR / "b", status="running", pid=os.getpid(),
+                    hostname=socket.gethostname(), config_hash="x")
+    assert cli.main(["--results", str(results), "results", "--force", "-j", "1"]) == 0
+    out = capsys.readouterr().out
+    assert f"busy   fake.b  (running as pid {os.getpid()}" in out
+    assert "partial" not in out and "2 ran" in out and runs["b"].wrote_in == []

@@ -60,8 +60,10 @@ class Experiment:
 
     ``config_cls()`` gives the paper's default configuration (a frozen
     dataclass). ``run(config, out_dir)`` writes trace files and a
-    ``manifest.json`` into ``out_dir`` (normally ``results/<paper>/<name>``)
-    and returns ``out_dir``; if it accepts an ``experiment`` keyword,
+    ``manifest.json`` into ``out_dir`` and returns ``out_dir``; :func:`run_experiment`
+    gives it the staging folder of the run's folder (``results/<paper>/.partial/<name>``,
+    swapped in for ``results/<paper>/<name>`` when it returns), so a run must name its own
+    files by relative paths only; if it accepts an ``experiment`` keyword,
     :func:`run_experiment` passes the registered name through it. ``slow``
     experiments are skipped by ``repro results`` unless ``--include-slow`` is
     given. ``check(config)`` (optional) raises :class:`~repro.errors.ConfigError`
