@@ -73,6 +73,20 @@ def _wait_for_runs(proc: subprocess.Popen[str], results: Path, n: int) -> None:
         time.sleep(0.05)
 
 
+def _wait_reaped(run_dirs: list[Path], timeout_s: float = 60.0) -> None:
+    """Wait until the processes that wrote ``run_dirs`` are gone: killed workers are
+    orphans, zombies (still "alive" to kill(pid, 0)) until init reaps them."""
+    pids = [json.loads((d / "manifest.json").read_text())["pid"] for d in run_dirs]
+    deadline = time.monotonic() + timeout_s
+    for pid in pids:
+        while time.monotonic() < deadline:
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.05)
+
+
 def _start(*argv: str) -> subprocess.Popen[str]:
     return subprocess.Popen([sys.executable, "-m", "repro", *argv], cwd=ROOT, env=ENV,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -99,9 +113,11 @@ def test_a_signal_during_repro_results_force_leaves_every_committed_run_byte_ide
 
     proc = _start("--results", str(results), "results", "--force", "-j", "2")
     _wait_for_runs(proc, results, 2)  # chan2011 simulation and simulation_render
+    writers = _being_written(results)
     out, err = _stop(proc, sig, group)
     assert proc.returncode == code, err
     assert not re.search(r"^ran ", out, re.M), f"a run completed before the signal: {out}"
+    _wait_reaped(writers)
     assert _runs(results) == before  # every committed file, byte for byte
 
     # the partial runs are aside, named after their folders
