@@ -13,8 +13,10 @@ Global options ``--results DIR`` (default ``./results``) and ``--figures DIR``
 (default ``./figures``) may be given before or after the subcommand.
 A :class:`~repro.errors.ReproError` prints one line on stderr and exits 2.
 Every config is validated (ranges, choices, the experiment's own check) before any
-folder is created. SIGINT and SIGTERM during a run close it with status
-``interrupted``, print one line and exit 130 / 143 (128 + the signal number).
+folder is created. A run is written beside its folder (``<parent>/.partial/<name>/``) and
+swapped in when it returns (:mod:`repro.runs.staging`). SIGINT and SIGTERM during a run
+close it with status ``interrupted`` there, leave the folder it would replace as it was,
+print one line and exit 130 / 143 (128 + the signal number).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from repro.errors import ConfigError, ReproError, UnknownChoiceError
 from repro.runs import registry
 from repro.runs.registry import Experiment, Paper
 from repro.runs.signals import stop_on_signals
+from repro.runs.staging import PARTIAL_DIR, REPLACED_DIR, staging_dir
 
 __all__ = ["main", "build_parser"]
 
@@ -285,18 +288,25 @@ def default_out_dir(exp: Experiment, results_dir: Path, config: Any) -> Path:
 
 
 def _interrupted(fired: list[int], out_dir: Path, since: float) -> int:
-    """Print the one-line report of a run interrupted after ``since`` (time.time()); return
-    the exit code 128 + signum. A trace.csv older than ``since`` is an earlier run's: 0 rows."""
+    """Print the one-line report of a run of ``out_dir`` interrupted after ``since``
+    (time.time()); return the exit code 128 + signum. The partial run is in the staging
+    folder, ``out_dir`` as it was; a signal that came as the run was swapped in (it is
+    acted on once the swap is done) finds no staging folder and a fresh manifest."""
     from repro.runs.trace import count_trace_rows
 
     signum = fired[0] if fired else int(signal.SIGINT)
-    trace = out_dir / "trace.csv"
-    fresh = trace.is_file() and trace.stat().st_mtime >= since - 1.0  # coarse fs clocks
-    print(
-        f"repro: interrupted ({signal.Signals(signum).name}) after "
-        f"{count_trace_rows(out_dir) if fresh else 0} rows; partial trace in {out_dir}",
-        file=sys.stderr,
-    )
+    name = signal.Signals(signum).name
+    stage = staging_dir(out_dir)
+    manifest = out_dir / registry.MANIFEST_NAME
+    if (stage / registry.MANIFEST_NAME).is_file():
+        kept = (f"; {out_dir} kept as it was" if manifest.is_file()
+                else f"; nothing in {out_dir}")
+        line = (f"after {count_trace_rows(stage)} rows; partial trace in {stage}{kept}")
+    elif manifest.is_file() and manifest.stat().st_mtime >= since - 1.0:  # coarse fs clocks
+        line = f"as the run closed; it is complete in {out_dir}"
+    else:
+        line = f"before the run recorded anything; {out_dir} as it was"
+    print(f"repro: interrupted ({name}) {line}", file=sys.stderr)
     return 128 + signum
 
 
@@ -336,6 +346,10 @@ def check_run_location(out_dir: Path, results_dir: Path, papers: Mapping[str, Pa
     in it, a folder inside another run, or a folder that holds runs."""
     target = Path(out_dir).resolve()
     root = Path(results_dir).resolve()
+    if any(part in (PARTIAL_DIR, REPLACED_DIR) for part in target.parts):
+        raise ConfigError(f"--out {out_dir} is inside a {PARTIAL_DIR} or {REPLACED_DIR} "
+                          "folder, where runs are written aside before they replace their "
+                          "folder: give a folder of its own")
     if target == root or (target.parent == root and target.name in papers):
         raise ConfigError(f"--out {out_dir} is a results folder that holds runs, not a run "
                           "folder: give a folder of its own (e.g. <results>/<paper>/<name>)")
@@ -441,7 +455,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if running is not None:
         raise ConfigError(f"{out_dir} is being written by another run ({running}); wait for "
                           "it or choose another --out")
-    make_dir(out_dir, "--out" if args.out is not None else "--results")
+    # the run is written in <parent>/.partial/<name> and swapped in when it returns
+    make_dir(out_dir.parent, "--out" if args.out is not None else "--results")
     print(f"running {exp.id} -> {out_dir}", file=sys.stderr)
     result = _run_interruptible(exp, config, out_dir)
     if isinstance(result, int):
@@ -463,32 +478,66 @@ def _run_interruptible(exp: Experiment, config: Any, out_dir: Path) -> Path | in
         return _interrupted(fired, out_dir, started)
 
 
-def _fix_dead_runs(papers: Mapping[str, Paper], results_dir: Path) -> list[tuple[Path, dict]]:
-    """Mark every ``running`` run under ``<results>/<paper>/*/`` whose process is gone as
-    interrupted (default and override folders alike); return ``(folder, new manifest)``."""
-    from repro.runs.trace import mark_if_gone, recover_manifest_tmp
+@dataclasses.dataclass(frozen=True)
+class DeadRuns:
+    """What ``repro results`` found of runs that did not end where they were going.
 
-    fixed = []
+    ``marked``: run folders whose ``running`` manifest's process is gone, now marked
+    interrupted (``(folder, new manifest)``); ``partial``: staging folders a stopped run left
+    (``(staging folder, its manifest as read)``: interrupted or crashed; the run they would
+    have replaced is untouched); ``recovered``: swaps a killed process cut short, undone or
+    finished (one line each).
+    """
+
+    marked: list[tuple[Path, dict[str, Any]]]
+    partial: list[tuple[Path, dict[str, Any]]]
+    recovered: list[str]
+
+
+def _fix_dead_runs(papers: Mapping[str, Paper], results_dir: Path) -> DeadRuns:
+    """Under ``<results>/<paper>/`` of every paper: finish or undo a swap cut short
+    (:func:`repro.runs.staging.recover_all`), mark every ``running`` run whose process is
+    gone as interrupted (default and override folders alike), and find the partial runs in
+    ``.partial/`` (live ones, still ``running``, excepted)."""
+    from repro.runs.staging import partial_runs, recover_all
+    from repro.runs.trace import effective_manifest, mark_if_gone, recover_manifest_tmp
+
+    found = DeadRuns([], [], [])
     for paper in papers:
-        for tmp in (Path(results_dir) / paper).glob(f"*/{registry.MANIFEST_NAME}.tmp"):
-            recover_manifest_tmp(tmp.parent)
-        manifests = (Path(results_dir) / paper).glob(f"*/{registry.MANIFEST_NAME}")
-        for manifest_path in sorted(manifests):
+        paper_dir = Path(results_dir) / paper
+        if not paper_dir.is_dir():
+            continue
+        found.recovered.extend(recover_all(paper_dir))
+        partials = partial_runs(paper_dir)
+        for run_dir in [*(p.parent for p in paper_dir.glob(f"*/{registry.MANIFEST_NAME}.tmp")),
+                        *partials]:
+            recover_manifest_tmp(run_dir)
+        for manifest_path in sorted(paper_dir.glob(f"*/{registry.MANIFEST_NAME}")):
             manifest = mark_if_gone(manifest_path.parent)
             if manifest is not None:
-                fixed.append((manifest_path.parent, manifest))
-    return fixed
+                found.marked.append((manifest_path.parent, manifest))
+        for run_dir in partials:
+            mark_if_gone(run_dir)
+            try:
+                manifest = effective_manifest(run_dir)
+            except ReproError:  # a staging folder without a manifest: a run just starting
+                continue
+            if manifest.get("status") != "running":  # a live run is busy, not partial
+                found.partial.append((run_dir, manifest))
+    return found
 
 
 def _running_elsewhere(run_dir: Path) -> str | None:
-    """``"pid N on HOST"`` if ``run_dir``'s manifest says a live process is writing it."""
-    try:
-        manifest = json.loads((run_dir / registry.MANIFEST_NAME).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    if not isinstance(manifest, dict) or manifest.get("status") != "running":
-        return None
-    return f"pid {manifest.get('pid', '?')} on {manifest.get('hostname', '?')}"
+    """``"pid N on HOST"`` if a live process is writing a run of ``run_dir``: a ``running``
+    manifest in its staging folder (or, from a run made in place, in ``run_dir``)."""
+    for folder in (staging_dir(run_dir), run_dir):
+        try:
+            manifest = json.loads((folder / registry.MANIFEST_NAME).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if isinstance(manifest, dict) and manifest.get("status") == "running":
+            return f"pid {manifest.get('pid', '?')} on {manifest.get('hostname', '?')}"
+    return None
 
 
 def _bounded_int(text: str, high: int) -> int:
@@ -517,8 +566,8 @@ def _run_todo_parallel(todo: Sequence[tuple[Experiment, Any, str]], results: Pat
     from repro.runs.parallel import run_parallel
 
     out_dirs = [registry.experiment_dir(results, exp) for exp, _, _ in todo]
-    for d in out_dirs:
-        make_dir(d, "--results")
+    for d in out_dirs:  # each run is written in <paper>/.partial/<name>, then swapped in
+        make_dir(d.parent, "--results")
 
     def one(i: int) -> Path | int:
         exp, config, _ = todo[i]
@@ -534,11 +583,27 @@ def _run_todo_parallel(todo: Sequence[tuple[Experiment, Any, str]], results: Pat
             detail = {"interrupted": "closed as interrupted", "crashed": "crashed (see its "
                       "manifest)", "lost": f"worker died (exit {o.exitcode}); marked "
                       "interrupted", "not_started": "not started"}[o.status]
-            print(f"{o.status:<6} {exp.id}  ({detail}) -> {o.out_dir}", file=sys.stderr)
+            where = staging_dir(o.out_dir)  # the partial run, the run folder untouched
+            if o.status == "not_started" or not where.is_dir():
+                where = o.out_dir
+            elif (o.out_dir / registry.MANIFEST_NAME).is_file():
+                detail += f"; {o.out_dir} kept as it was"
+            print(f"{o.status:<6} {exp.id}  ({detail}) -> {where}", file=sys.stderr)
             code = code or (1 if o.status in ("crashed", "lost") else 0)
     if fired is not None:
         code = 128 + fired
     return ran, code
+
+
+def _partial_line(run_dir: Path, manifest: Mapping[str, Any], rerun: set[Path]) -> str:
+    """The line of ``repro results`` for the partial run in the staging folder ``run_dir``
+    (``rerun``: the run folders this invocation makes, each reusing its staging folder)."""
+    target = run_dir.parent.parent / run_dir.name
+    kept = ("kept as it was" if (target / registry.MANIFEST_NAME).is_file() else "has no run")
+    fate = "rerun now" if target in rerun else "removed when that run is next made"
+    return (f"{manifest.get('status', '?'):<11}  {run_dir}  (partial run: "
+            f"{manifest.get('reason', '')}; {manifest.get('n_rows', '?')} rows; {target} "
+            f"{kept}; {fate})")
 
 
 def _cmd_results(args: argparse.Namespace) -> int:
@@ -568,8 +633,13 @@ def _cmd_results(args: argparse.Namespace) -> int:
         else:
             fresh.append((exp, reason))
 
-    for run_dir, manifest in fixed:
+    for line in fixed.recovered:
+        print(f"recovered    {line}")
+    for run_dir, manifest in fixed.marked:
         print(f"interrupted  {run_dir}  ({manifest['reason']})")
+    rerun = {registry.experiment_dir(args.results, exp) for exp, _, _ in todo}
+    for run_dir, manifest in fixed.partial:
+        print(_partial_line(run_dir, manifest, rerun))
     ran: list[tuple[Experiment, str, Path]] = []
     jobs = args.jobs if args.jobs is not None else (os.cpu_count() or 1)
     code = 0
@@ -586,7 +656,7 @@ def _cmd_results(args: argparse.Namespace) -> int:
         for exp, config, reason in todo:
             bar.set_postfix_str(exp.id)
             out_dir = registry.experiment_dir(args.results, exp)
-            make_dir(out_dir, "--results")
+            make_dir(out_dir.parent, "--results")  # the run is written in .partial/<name>
             path = _run_interruptible(exp, config, out_dir)
             if isinstance(path, int):
                 return path
@@ -604,8 +674,10 @@ def _cmd_results(args: argparse.Namespace) -> int:
     counts = f"{len(ran)} ran, {len(fresh)} fresh, {len(skipped)} skipped"
     if busy:
         counts += f", {len(busy)} busy"
-    if fixed:
-        counts += f", {len(fixed)} marked interrupted"
+    if fixed.marked:
+        counts += f", {len(fixed.marked)} marked interrupted"
+    if fixed.partial:
+        counts += f", {len(fixed.partial)} partial"
     print(counts)
     return code
 

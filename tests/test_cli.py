@@ -34,18 +34,32 @@ class NoVideoCfg:
     steps: int = param(10, range=(1, 1000))
 
 
+def run_folder_of(folder: Path) -> Path:
+    """The run folder a run writing in ``folder`` is for: ``<parent>/<name>`` for its staging
+    folder ``<parent>/.partial/<name>`` (repro.runs.staging), else ``folder``."""
+    folder = Path(folder)
+    if folder.parent.name == ".partial":
+        return folder.parent.parent / folder.name
+    return folder
+
+
 class Runner:
-    """A fake ``Experiment.run`` recording its calls and writing a completed manifest."""
+    """A fake ``Experiment.run`` recording its calls and writing a completed manifest.
+
+    ``calls``: (config, the run folder the run is for); ``wrote_in``: the folder it was given
+    (its staging folder)."""
 
     def __init__(self, paper: str, status: str = "completed",
                  error: Exception | None = None) -> None:
         self.paper = paper
         self.calls: list[tuple[Any, Path]] = []
+        self.wrote_in: list[Path] = []
         self.status = status
         self.error = error
 
     def __call__(self, config: Any, out_dir: Path) -> Path:
-        self.calls.append((config, out_dir))
+        self.calls.append((config, run_folder_of(out_dir)))
+        self.wrote_in.append(out_dir)
         if self.error is not None:
             raise self.error
         # As the real run functions do: the experiment named after the folder.
@@ -268,6 +282,9 @@ def test_run_defaults_to_paper_name_dir(papers, runners, tmp_path):
     assert config == FakeCfg()
     assert out_dir == tmp_path / "fake" / "case1"
     assert (out_dir / "manifest.json").is_file()
+    # written aside, then swapped in: no staging folder is left
+    assert runners["fake.case1"].wrote_in == [tmp_path / "fake" / ".partial" / "case1"]
+    assert sorted(p.name for p in (tmp_path / "fake").iterdir()) == ["case1"]
 
 
 def test_run_out_dir_option(papers, runners, tmp_path):
@@ -699,8 +716,10 @@ def test_run_refuses_a_folder_a_live_run_is_writing(papers, runners, tmp_path, c
 def test_run_refuses_a_folder_another_process_has_locked(papers, runners, tmp_path, capsys):
     """Two `repro run`s of one config into one folder: the second is refused in one line
     (an flock on the folder, race-free; released when the holder ends or dies)."""
+    from repro.runs.staging import staged
+
     out = tmp_path / "run"
-    with registry.run_folder_lock(out):
+    with staged(out):  # what a live run of that folder holds: its staging folder
         assert cli.main(["run", "fake.case1", "--out", str(out), "--force"]) == 2
         assert "being written by another repro process" in capsys.readouterr().err
     assert cli.main(["run", "fake.case1", "--out", str(out), "--force"]) == 0

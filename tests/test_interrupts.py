@@ -1,6 +1,8 @@
 """Interrupted runs, for real (issue 7): a ``repro run`` subprocess is stopped by SIGINT,
 SIGTERM or SIGKILL once its trace has rows; the run must end ``interrupted`` with one line
-on stderr, or, after SIGKILL, be read and marked as interrupted by ``repro results``."""
+on stderr, or, after SIGKILL, be read and marked as interrupted by ``repro results``. A run
+is made in its folder's staging folder (``<parent>/.partial/<name>``, issue 40): that is
+where a stopped run's partial files are, and nothing is left under the folder's name."""
 
 from __future__ import annotations
 
@@ -32,6 +34,11 @@ def _start(out: Path, results: Path) -> subprocess.Popen[str]:
                             stderr=subprocess.PIPE, text=True)
 
 
+def _partial(out: Path) -> Path:
+    """Where a run of ``out`` is made (repro.runs.staging.staging_dir)."""
+    return out.parent / ".partial" / out.name
+
+
 def _wait_for_rows(proc: subprocess.Popen[str], out: Path, timeout_s: float = 10.0) -> None:
     deadline = time.monotonic() + timeout_s
     while count_trace_rows(out) < 1:
@@ -48,7 +55,7 @@ def _wait_for_rows(proc: subprocess.Popen[str], out: Path, timeout_s: float = 10
 def test_signal_closes_the_run_as_interrupted_with_one_line(sig, code, tmp_path):
     out = tmp_path / "run"
     proc = _start(out, tmp_path / "results")
-    _wait_for_rows(proc, out)
+    _wait_for_rows(proc, _partial(out))
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=15)
 
@@ -57,11 +64,13 @@ def test_signal_closes_the_run_as_interrupted_with_one_line(sig, code, tmp_path)
     lines = [line for line in err.splitlines() if not line.startswith(FOREIGN)]
     assert len(lines) == 1, err
     match = re.fullmatch(rf"repro: interrupted \({sig.name}\) after (\d+) rows; "
-                         rf"partial trace in {re.escape(str(out))}", lines[0])
+                         rf"partial trace in {re.escape(str(_partial(out)))}; nothing in "
+                         rf"{re.escape(str(out))}", lines[0])
     assert match, lines[0]
     n_rows = int(match.group(1))
 
-    run = load_run(out)  # every file is there and readable
+    assert not out.exists()  # a new folder: no partial run under its name
+    run = load_run(_partial(out))  # every file is there and readable
     assert run.manifest["status"] == "interrupted"
     assert run.manifest["reason"] == f"KeyboardInterrupt: {sig.name}"
     assert run.manifest["experiment"] == "case1"
@@ -72,12 +81,14 @@ def test_sigkill_leaves_a_running_manifest_that_repro_results_marks_interrupted(
     tmp_path, monkeypatch, capsys
 ):
     results = tmp_path / "results"
-    out = results / "thomas2024" / "case1__x"
-    proc = _start(out, results)
+    target = results / "thomas2024" / "case1__x"
+    out = _partial(target)
+    proc = _start(target, results)
     _wait_for_rows(proc, out)
     proc.kill()
     proc.wait(timeout=10)  # reaped: its pid is gone
     assert proc.returncode == -signal.SIGKILL
+    assert not target.exists()
 
     manifest = json.loads((out / "manifest.json").read_text())
     assert (manifest["status"], manifest["n_rows"]) == ("running", 0)
@@ -100,9 +111,10 @@ def test_sigkill_leaves_a_running_manifest_that_repro_results_marks_interrupted(
     monkeypatch.setattr(registry, "load_papers", lambda: {"thomas2024": paper})
     assert cli.main(["--results", str(results), "results"]) == 0
     printed = capsys.readouterr().out
-    assert f"interrupted  {out}  (process gone: pid {proc.pid}" in printed
-    assert f"{n_rows} rows in trace.csv (rerun it)" in printed
-    assert "1 marked interrupted" in printed
+    assert f"interrupted  {out}  (partial run: process gone: pid {proc.pid}" in printed
+    assert f"{n_rows} rows in trace.csv (rerun it); {n_rows} rows; {target} has no run" \
+        in printed
+    assert "1 partial" in printed
 
     fixed = json.loads((out / "manifest.json").read_text())
     assert (fixed["status"], fixed["n_rows"]) == ("interrupted", n_rows)
@@ -127,8 +139,8 @@ def test_chan2011_nmpc_run_stops_between_steps_on_sigint(tmp_path, delay_s, seco
     KeyboardInterrupt raised inside it was swallowed (the run went on) or became a
     SystemError / NotImplementedError (a crash); now every signal is held through the step
     (repro.runs.signals.StepGuard) and a second one, 50 ms later, is ignored."""
-    out = tmp_path / "run"
-    proc = _start_exp("chan2011.simulation", out, tmp_path / "results")
+    out = _partial(tmp_path / "run")
+    proc = _start_exp("chan2011.simulation", tmp_path / "run", tmp_path / "results")
     _wait_for_rows(proc, out, timeout_s=60.0)
     time.sleep(delay_s)
     proc.send_signal(signal.SIGINT)
@@ -157,7 +169,7 @@ def test_repro_results_stops_on_sigterm(tmp_path):
         proc = subprocess.Popen(cmd, cwd=Path(__file__).parents[1], stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + 60
-        while not any(count_trace_rows(d) for d in (results / "chan2011").glob("*")):
+        while not any(count_trace_rows(d) for d in (results / "chan2011" / ".partial").glob("*")):
             assert time.monotonic() < deadline and proc.poll() is None
             time.sleep(0.05)
         proc.send_signal(signal.SIGTERM)
@@ -165,8 +177,10 @@ def test_repro_results_stops_on_sigterm(tmp_path):
         assert proc.returncode == 143, err
         assert "Traceback" not in err
         statuses = [json.loads((d / "manifest.json").read_text())["status"]
-                    for d in (results / "chan2011").glob("*") if (d / "manifest.json").is_file()]
+                    for d in (results / "chan2011" / ".partial").glob("*")
+                    if (d / "manifest.json").is_file()]
         assert statuses and set(statuses) == {"interrupted"}, statuses
+        assert not list((results / "chan2011").glob("*/manifest.json"))  # none swapped in
 
 
 def test_a_signal_is_held_through_a_deferred_block_and_a_step():

@@ -80,9 +80,12 @@ def test_a_worker_killed_outright_is_marked_interrupted_and_the_rest_run(
     monkeypatch.setitem(papers, "fake", Paper("fake", (fake.experiments[0], killed)))
     assert cli.main(["--results", str(tmp_path), "results", "-j", "2"]) == 1
     captured = capsys.readouterr()
-    m = _manifest(tmp_path / "fake" / "case2")
+    partial = tmp_path / "fake" / ".partial" / "case2"  # the run stays aside, marked
+    m = _manifest(partial)
     assert m["status"] == "interrupted" and "process gone" in m["reason"]
-    assert "lost   fake.case2" in captured.err
+    assert not (tmp_path / "fake" / "case2").exists()  # nothing under the run's own name
+    assert f"lost   fake.case2  (worker died (exit -9); marked interrupted) -> {partial}" \
+        in captured.err
     assert _manifest(tmp_path / "fake" / "case1")["status"] == "completed"
     assert _manifest(tmp_path / "other" / "case1")["status"] == "completed"
     assert "2 ran" in captured.out
@@ -105,9 +108,10 @@ def test_sigterm_closes_every_live_run_as_interrupted(tmp_path: Path) -> None:
                             stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     runs: list[Path] = []
+    partial = results / "thomas2024" / ".partial"  # where the runs are made
     while len(runs) < 2:
-        runs = [d for d in (results / "thomas2024").glob("*") if count_trace_rows(d) > 0] \
-            if (results / "thomas2024").is_dir() else []
+        runs = [d for d in partial.glob("*") if count_trace_rows(d) > 0] \
+            if partial.is_dir() else []
         if proc.poll() is not None or time.monotonic() > deadline:
             proc.kill()
             pytest.fail(f"two runs did not start: {proc.communicate()}")
@@ -115,8 +119,9 @@ def test_sigterm_closes_every_live_run_as_interrupted(tmp_path: Path) -> None:
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err
-    started = sorted((results / "thomas2024").glob("*/manifest.json"))
+    started = sorted(partial.glob("*/manifest.json"))
     assert len(started) == 2, started
+    assert not list((results / "thomas2024").glob("*/manifest.json"))  # none swapped in
     for m in started:
         man = json.loads(m.read_text())
         assert man["status"] == "interrupted" and man["n_rows"] > 0 and man["concurrent_runs"] == 2

@@ -9,9 +9,14 @@ that its manifest says how many runs shared the machine. The parent starts at mo
 * on SIGINT or SIGTERM starts no new run, passes the signal to every live worker (each
   closes its run as interrupted; a second signal is ignored by a closing worker), waits
   for them and reports the exit code ``128 + signal``;
-* marks a worker that died without closing its run (SIGKILL, out of memory) as lost: its
-  run folder's manifest is rewritten ``interrupted`` ("process gone", rows counted) by
-  :func:`repro.runs.trace.mark_if_gone`, and the other runs go on.
+* marks a worker that died without closing its run (SIGKILL, out of memory) as lost: the
+  manifest of its partial run (in the run folder's staging folder,
+  :func:`repro.runs.staging.staging_dir`) is rewritten ``interrupted`` ("process gone", rows
+  counted) by :func:`repro.runs.trace.mark_if_gone`, a swap it cut short is undone or
+  finished (:func:`repro.runs.staging.recover`), and the other runs go on.
+
+A run replaces its folder only when it returns (:mod:`repro.runs.staging`): whatever stops
+a worker, the run folder it was remaking is left as it was.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any, Literal
 
+from repro.runs.staging import recover, staging_dir
 from repro.runs.trace import CONCURRENT_RUNS_ENV, mark_if_gone
 
 __all__ = ["Outcome", "run_parallel"]
@@ -70,7 +76,8 @@ def run_parallel(out_dirs: Sequence[Path], run: Callable[[int], Path | int], wor
     """Run ``run(i)`` for every ``i`` of ``out_dirs`` in at most ``workers`` processes.
 
     Args:
-        out_dirs: the run folder of each job (for reporting and for marking lost runs).
+        out_dirs: the run folder of each job (for reporting and for marking lost runs: the
+            partial run is in its staging folder).
         run: the serial runner of job ``i``: its run folder, or the exit code of an
             interrupted run (``repro.cli._run_interruptible``).
         workers: most runs at once (>= 1).
@@ -131,5 +138,7 @@ def _outcome(i: int, out_dir: Path, code: int) -> Outcome:
         return Outcome(i, out_dir, "crashed", code)
     if code > 128:
         return Outcome(i, out_dir, "interrupted", code)
-    mark_if_gone(out_dir)  # killed outright (code = -signal): the run never closed
+    # killed outright (code = -signal): the run never closed, maybe not even swapped in
+    recover(out_dir)
+    mark_if_gone(staging_dir(out_dir))
     return Outcome(i, out_dir, "lost", code)

@@ -10,7 +10,9 @@ declares it in ``pyproject.toml``::
 the ``repro.experiments`` entry-point group.
 
 Results layout: ``<results_dir>/<paper>/<name>/`` holds one experiment's trace
-files and its ``manifest.json`` (with at least ``status`` and ``config_hash``).
+files and its ``manifest.json`` (with at least ``status`` and ``config_hash``). A run is
+written into ``<results_dir>/<paper>/.partial/<name>/`` and swapped in when it returns
+(:mod:`repro.runs.staging`); a stopped run stays there, the complete one in place.
 """
 
 from __future__ import annotations
@@ -21,9 +23,8 @@ import hashlib
 import importlib
 import inspect
 import json
-import os
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -31,6 +32,7 @@ from typing import Any
 
 from repro.config import check_declared, validate
 from repro.errors import ReproError, UnknownChoiceError
+from repro.runs.staging import run_folder_lock, staged
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -43,6 +45,8 @@ __all__ = [
     "compute_config_hash",
     "check_config",
     "run_experiment",
+    "run_folder_lock",
+    "run_in",
     "is_stale",
 ]
 
@@ -56,8 +60,10 @@ class Experiment:
 
     ``config_cls()`` gives the paper's default configuration (a frozen
     dataclass). ``run(config, out_dir)`` writes trace files and a
-    ``manifest.json`` into ``out_dir`` (normally ``results/<paper>/<name>``)
-    and returns ``out_dir``; if it accepts an ``experiment`` keyword,
+    ``manifest.json`` into ``out_dir`` and returns ``out_dir``; :func:`run_experiment`
+    gives it the staging folder of the run's folder (``results/<paper>/.partial/<name>``,
+    swapped in for ``results/<paper>/<name>`` when it returns), so a run must name its own
+    files by relative paths only; if it accepts an ``experiment`` keyword,
     :func:`run_experiment` passes the registered name through it. ``slow``
     experiments are skipped by ``repro results`` unless ``--include-slow`` is
     given. ``check(config)`` (optional) raises :class:`~repro.errors.ConfigError`
@@ -238,50 +244,40 @@ def _accepts_keyword(fn: Callable[..., Any], name: str) -> bool:
 
 
 def run_experiment(exp: Experiment, config: Any, out_dir: Path) -> Path:
-    """Run ``exp`` with ``config`` into ``out_dir``; return the run's folder.
+    """Run ``exp`` with ``config`` for the run folder ``out_dir``; return the run's folder.
+
+    The run is written into ``out_dir``'s staging folder and replaces ``out_dir`` only when
+    ``exp.run`` returns (:func:`repro.runs.staging.staged`): an interrupted, crashed or
+    killed run leaves ``out_dir`` as it was and its partial files in
+    ``<parent>/.partial/<name>``. A path the run returns inside the staging folder is given
+    back inside ``out_dir``.
+    """
+    out_dir = Path(out_dir)
+    with staged(out_dir) as stage:
+        result = run_in(exp, config, stage)
+    with contextlib.suppress(ValueError):
+        return out_dir / result.relative_to(stage)
+    return result
+
+
+def run_in(exp: Experiment, config: Any, folder: Path) -> Path:
+    """Run ``exp`` with ``config`` straight into ``folder``, which the caller holds (a staging
+    folder: :func:`run_experiment`, a sweep's variant, :func:`repro.runs.sweep.run_variant`);
+    return what ``exp.run`` returned (``folder`` if nothing).
 
     The manifest names the registered experiment (``exp.name``) whatever the folder is
     called (``--out``, ``<name>__<hash>``): passed as ``experiment=`` when ``exp.run``
     accepts that keyword, else written into the manifest the run wrote (also after an
     interrupt or a crash).
     """
-    out_dir = Path(out_dir)
+    folder = Path(folder)
     kwargs = {"experiment": exp.name} if _accepts_keyword(exp.run, "experiment") else {}
     started = time.time()
-    with run_folder_lock(out_dir):
-        try:
-            result = exp.run(config, out_dir, **kwargs)
-        finally:
-            _name_experiment(out_dir, exp.name, since=started)
-    return Path(result) if result is not None else out_dir
-
-
-@contextlib.contextmanager
-def run_folder_lock(out_dir: Path) -> Iterator[None]:
-    """Hold an exclusive lock on the run folder ``out_dir`` (``flock`` on the folder itself:
-    no lock file, released by the kernel when the process dies) while a run writes it.
-
-    Raises:
-        ReproError: another process holds it (two runs of one config into one folder would
-            interleave their rows).
-    """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     try:
-        import fcntl
-    except ImportError:  # not POSIX: the manifest's live-writer check only
-        yield
-        return
-    fd = os.open(out_dir, os.O_RDONLY)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise ReproError(f"{out_dir} is being written by another repro process; wait for "
-                             "it or choose another --out") from None
-        yield
+        result = exp.run(config, folder, **kwargs)
     finally:
-        os.close(fd)
+        _name_experiment(folder, exp.name, since=started)
+    return Path(result) if result is not None else folder
 
 
 def _name_experiment(out_dir: Path, name: str, *, since: float) -> None:

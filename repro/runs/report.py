@@ -24,6 +24,7 @@ import pandas as pd
 from repro.errors import ReproError
 from repro.runs.claims import STATUSES, natural_key, read_claims_csv
 from repro.runs.report_causes import causes_section
+from repro.runs.staging import is_aside
 from repro.runs.trace import TRACKED_PACKAGES, effective_manifest
 from repro.runs.validate import DamagedRun, check_run
 
@@ -159,6 +160,8 @@ def collect_ours(paths: Sequence[Path]) -> pd.DataFrame:
 def _read_manifests(paper_dir: Path) -> list[tuple[str, dict[str, Any]]]:
     runs = []
     for manifest_path in paper_dir.rglob("manifest.json"):
+        if is_aside(manifest_path.relative_to(paper_dir)):  # a stopped run's staging folder
+            continue
         run = manifest_path.parent.relative_to(paper_dir).as_posix()
         try:
             manifest = json.loads(manifest_path.read_text(encoding="utf-8"))

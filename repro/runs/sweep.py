@@ -43,6 +43,7 @@ from repro.runs.causes import (
 )
 from repro.runs.claims import Claim, ClaimResult, extent_note
 from repro.runs.registry import Experiment, Paper, run_folder_lock
+from repro.runs.staging import staged
 from repro.runs.sweep_rates import REFUSED
 from repro.runs.trace import load_run
 from repro.sweep_ranges import declared_ranges, sample_variants
@@ -189,7 +190,13 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
                 sweep_dir: Path, keep_traces: bool = False,
                 papers: Mapping[str, Paper] | None = None) -> dict[str, Any]:
     """Run (or, if already judged, read) variant ``index`` and return its row: the swept
-    experiment and each partner (:func:`sweep_members`) with the same ``overrides``."""
+    experiment and each partner (:func:`sweep_members`) with the same ``overrides``.
+
+    The variant is made whole in its staging folder (``variants/.partial/<hash>``: the
+    members' runs, the judging, ``verdicts.json``, the pruning) and swapped in for
+    ``variants/<hash>`` at the end (:func:`repro.runs.staging.staged`): a variant folder is
+    there only once judged, and a stopped or killed variant leaves its partial files aside,
+    where the next sweep's run of it starts afresh."""
     exp, paper = _experiment(exp_id, papers)
     members = sweep_members(exp, paper)
     model = cause_model(paper)
@@ -207,8 +214,19 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
         if done.get("config_hash") == chash and not needs_evidence(
                 model, exp.name, done.get("verdicts") or {}, done.get("evidence_version")):
             return {**done["row"], "variant": index}
+    with staged(run_dir) as stage:
+        row = _make_variant(exp, paper, model, members, configs, chash, index, overrides,
+                            stage, keep_traces)
+    return row
+
+
+def _make_variant(exp: Experiment, paper: Paper, model: CauseModel | None,
+                  members: Sequence[Experiment], configs: Mapping[str, Any], chash: str,
+                  index: int,
+                  overrides: Mapping[str, Any], run_dir: Path, keep_traces: bool
+                  ) -> dict[str, Any]:
+    """Run, judge and prune variant ``index`` in ``run_dir`` (its staging folder, held)."""
     tic = time.perf_counter()
-    run_dir.parent.mkdir(parents=True, exist_ok=True)
     dirs = {m.name: _member_dir(run_dir, exp.name, m.name) for m in members}
     status, reason, verdicts = "completed", "", {}
     evidence: dict[str, Any] = {}
@@ -219,7 +237,7 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
         status, reason = REFUSED, f"{m.name}: {exc}"
     try:
         for m in members if status == "completed" else ():
-            registry.run_experiment(m, configs[m.name], dirs[m.name])
+            registry.run_in(m, configs[m.name], dirs[m.name])
             manifest = json.loads((dirs[m.name] / "manifest.json").read_text(encoding="utf-8"))
             if manifest.get("status") != "completed" and status == "completed":
                 status = str(manifest.get("status"))
@@ -239,13 +257,11 @@ def run_variant(exp_id: str, index: int, overrides: Mapping[str, Any], camera: s
         for k, c in enumerate(v["clauses"], start=1):
             for what in ("measured", "margin", "holds"):
                 row[f"claim{cid}.c{k}.{what}"] = c[what]
-    run_dir.mkdir(parents=True, exist_ok=True)
-    verdicts_path.write_text(json.dumps({"config_hash": chash, "row": row,
-                                         "members": {n: str(d.relative_to(run_dir))
-                                                     for n, d in dirs.items()},
-                                         "verdicts": verdicts, **evidence}, indent=1,
-                                        default=_json),
-                             encoding="utf-8")
+    (run_dir / VERDICTS_FILE).write_text(json.dumps({"config_hash": chash, "row": row,
+                                                     "members": {n: str(d.relative_to(run_dir))
+                                                                 for n, d in dirs.items()},
+                                                     "verdicts": verdicts, **evidence},
+                                                    indent=1, default=_json), encoding="utf-8")
     if not keep_traces:
         _prune(run_dir, keep=[n for n in dirs if n != exp.name])
     return row
