@@ -266,7 +266,7 @@ def test_claim_5_reproduced_on_a_synthetic_trace() -> None:
         k for k in CLAUSES if k != "ablation")
     assert CLAIM_5.runs == ("exp3",) and CLAIM_5.claim == "5"
     assert CLAIM_5B.runs == ("exp3_no_tactile",) and CLAIM_5B.claim == "5b"
-    assert CLAIM_5.quote.startswith("Sec. 6") and CLAIM_5B.quote.startswith("Sec. 1")
+    assert CLAIM_5.quote.startswith("Sec. 6") and CLAIM_5B.quote.startswith("Sec. 2")
 
 
 def _edit(ticks_edit: dict[int, tuple[str, dict[int, tuple[str, float, int]]]]
