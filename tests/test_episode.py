@@ -5,6 +5,7 @@ columns and self-contained run folders."""
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 
@@ -587,3 +588,21 @@ def test_a_dynamic_body_falls_and_its_logged_pose_follows(tmp_path: Path) -> Non
     ball = next(b for b in run.scene["bodies"] if b["name"] == "ball")
     assert ball["dynamic"]["mass"] == 0.1 and ball["dynamic"]["lateralFriction"] == 0.8
     assert ball["pose_columns"][2] == "ball_z"
+
+
+def test_a_dot_seen_edge_on_is_reported_not_detectable() -> None:
+    """Issue 38: a missed dot seen within a fraction of a degree of edge-on is named so (its
+    image is under DETECTABLE_MINOR_AXIS_PX across), not 'visible, grazing'; one seen
+    from behind or well in view keeps its own cause."""
+    from repro.sim.episode import _why_missed
+
+    n = np.array([0.0, 0.0, 1.0])
+    P = np.zeros(3)
+    grazing = np.array([0.0, -0.3, 0.3 * math.cos(math.radians(89.6))])
+    got = _why_missed(True, False, grazing, P, n, minor_px=0.17)
+    assert got.startswith("seen edge-on (89.6 deg") and "not detectable" in got
+    assert "grazing" in _why_missed(True, True, grazing, P, n, minor_px=1.5)
+    assert _why_missed(True, False, np.array([0.0, 0.0, -0.3]), P, n, 0.0).startswith(
+        "seen from behind")
+    assert _why_missed(True, False, np.array([0.0, 0.0, 0.3]), P, n, 24.0).startswith(
+        "occluded")

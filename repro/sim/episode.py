@@ -42,7 +42,13 @@ from repro.errors import ConfigError
 from repro.runs.columns import COLUMNS_FILE, Columns
 from repro.runs.signals import StepGuard
 from repro.runs.trace import TraceRecorder
-from repro.sensors.camera import Camera, project_points, render_rgb
+from repro.sensors.camera import (
+    DETECTABLE_MINOR_AXIS_PX,
+    Camera,
+    disc_minor_axes_px,
+    project_points,
+    render_rgb,
+)
 from repro.sim.drives import Drive
 from repro.sim.robot import JointSet, Robot
 from repro.sim.scene import DISTANCE_CAP, Scene, pose_columns, pose_json
@@ -302,7 +308,9 @@ def runner_columns(ep: Episode) -> Columns:
         cols.add(f"{s}{{i}}_v_true", "px", "audit: exact projection (v) of model point {i}",
                  n=n, audit=True)
         cols.add(f"{s}{{i}}_visible", "bool", "audit: point {i} is in front of the camera, "
-                 "inside the image and no body lies between it and the camera (ray test)",
+                 "inside the image, its dot faces the camera, is not seen edge-on (its image "
+                 f">= {DETECTABLE_MINOR_AXIS_PX:g} px across) and no body lies between it and "
+                 "the camera (ray test; scene.json cameras.<name>.visibility)",
                  n=n, audit=True)
         cols.add(f"{s}{{i}}_err_px", "px", "audit: distance between detection and exact "
                  "projection of point {i} (NaN if not found)", n=n, audit=True)
@@ -341,11 +349,12 @@ def _joint_column_names(pre: str, n: int) -> tuple[list[str], list[str], list[st
 
 # ----------------------------------------------------------------------------- audit
 def _visible(scene: Scene, T_wc: np.ndarray, P_world: np.ndarray, normal: np.ndarray,
-             uv: np.ndarray, Z: np.ndarray, cam: Camera) -> np.ndarray:
-    """(N,) True where a point is in front, inside the image, faces the camera and is
-    unoccluded: a ray from the
-    camera to the point lifted by VISIBILITY_LIFT along ``normal`` meets no body (ray test
-    in the physics client, which holds every body)."""
+             uv: np.ndarray, Z: np.ndarray, cam: Camera, minor_px: np.ndarray) -> np.ndarray:
+    """(N,) True where a point is in front, inside the image, faces the camera (the camera
+    more than VISIBILITY_LIFT above the dot's plane), is detectable (its disc's image
+    ellipse at least DETECTABLE_MINOR_AXIS_PX across, ``minor_px``: not edge-on) and is
+    unoccluded: a ray from the camera to the point lifted by VISIBILITY_LIFT along
+    ``normal`` meets no body (ray test in the physics client, which holds every body)."""
     c = T_wc[:3, 3]
     P_world = P_world + VISIBILITY_LIFT * np.asarray(normal)
     d = P_world - c
@@ -357,7 +366,8 @@ def _visible(scene: Scene, T_wc: np.ndarray, P_world: np.ndarray, normal: np.nda
     free = np.array([h[0] < 0 or h[2] * (L - RAY_START) >= (L - RAY_START) - VISIBILITY_MARGIN
                      for h, L in zip(hits, length, strict=True)])
     facing = (c - P_world) @ np.asarray(normal) > 0  # the camera sees the dot's front face
-    return (Z > 0) & cam.intrinsics.in_image(uv) & free & facing
+    return ((Z > 0) & cam.intrinsics.in_image(uv) & free & facing
+            & (minor_px >= DETECTABLE_MINOR_AXIS_PX))
 
 
 @dataclass
@@ -379,20 +389,24 @@ class _Audit:
 
 
 def _missed_cause(camera: Camera, Z: float, uv: np.ndarray, visible: bool, c: np.ndarray,
-                  P: np.ndarray, normal: np.ndarray) -> str:
+                  P: np.ndarray, normal: np.ndarray, minor_px: float = math.inf) -> str:
     """:func:`_why_missed` of a dot at depth ``Z`` [m] whose centre projects to ``uv``
-    (1, 2) [px]."""
+    (1, 2) [px] and whose image ellipse is ``minor_px`` across [px]."""
     return _why_missed(bool(Z > 0 and camera.intrinsics.in_image(uv)[0]), visible, c, P,
-                       normal)
+                       normal, minor_px)
 
 
 def _why_missed(in_view: bool, visible: bool, c: np.ndarray, P: np.ndarray,
-                normal: np.ndarray) -> str:
+                normal: np.ndarray, minor_px: float = math.inf) -> str:
     """Ground-truth cause of a missed detection (for the feature_missed event)."""
     if not in_view:
         return "its projection is outside the image (or behind the camera)"
     d = c - P
     angle = float(np.degrees(np.arccos(np.clip(d @ normal / np.linalg.norm(d), -1.0, 1.0))))
+    if not visible and angle < 90 and minor_px < DETECTABLE_MINOR_AXIS_PX:
+        return (f"seen edge-on ({angle:.1f} deg from its normal: its image is {minor_px:.2f} px "
+                f"across, under the {DETECTABLE_MINOR_AXIS_PX:g} px a dot needs): not "
+                "detectable")
     if not visible:
         return (f"seen from behind ({angle:.0f} deg from its normal)" if angle >= 90
                 else "occluded by a body between it and the camera")
@@ -530,7 +544,8 @@ class _Runner:
         else:
             P = target.points_world(body.T_world)
             uv_true, _ = project_points(cam.camera.intrinsics, T_wc, P)
-        visible = _visible(scene, T_wc, P, body.T_world[:3, 2], uv_true, Z, cam.camera)
+        minor = disc_minor_axes_px(cam.camera.intrinsics, T_wc, target, body.T_world)
+        visible = _visible(scene, T_wc, P, body.T_world[:3, 2], uv_true, Z, cam.camera, minor)
         err = np.where(found, np.linalg.norm(uv - uv_true, axis=1), np.nan)
         if cam.log_view_angle:
             to_cam = T_wc[:3, 3] - P
@@ -561,7 +576,8 @@ class _Runner:
             self._dot_events(cam, s, j, t, k, bool(bad[i]), not found[i], bool(hidden[i]),
                              float(err[i]), functools.partial(
                                  _missed_cause, cam.camera, Z[i], uv_true[i:i + 1],
-                                 bool(visible[i]), T_wc[:3, 3], P[i], body.T_world[:3, 2]))
+                                 bool(visible[i]), T_wc[:3, 3], P[i], body.T_world[:3, 2],
+                                 float(minor[i])))
         return Features(uv, found, Z)
 
     def _dot_events(self, cam: CameraRig, s: str, j: int, t: float, k: int, bad: bool,
@@ -920,7 +936,13 @@ def _camera_json(cam: Camera) -> dict[str, Any]:
             "projection_matrix_gl": i.projection_matrix_gl("tiny"),
             "visibility": ("the <prefix><i>_visible audit: a point is visible when it is in "
                            "front of the true camera (Z > 0), projects inside the image, the "
-                           "camera is on its dot's front side (the target body's +z) and a ray "
+                           f"camera is more than {VISIBILITY_LIFT} m above its dot's plane on "
+                           "its front side (the target body's +z: (c - P - lift n) . n > 0), "
+                           "the dot is detectable (the image ellipse of its disc through the "
+                           "true camera, the conic H^-T C0 H^-1 of "
+                           "repro.sensors.camera.disc_image_centroids, is at least "
+                           f"{DETECTABLE_MINOR_AXIS_PX:g} px across its minor axis; a dot seen "
+                           "closer to edge-on images as a sliver no detector takes) and a ray "
                            f"cast from the camera centre ({RAY_START} m out along the ray) "
                            f"towards the point lifted {VISIBILITY_LIFT} m along that +z "
                            "(pybullet.rayTestBatch in the physics client, every body with a "
